@@ -1,0 +1,402 @@
+"""The one Blender adapter: Blender data → `scene.Scene`, and baked images back into materials.
+
+Everything else in the core takes numpy arrays; this module alone imports `bpy`. Export reads the
+evaluated depsgraph (modifiers applied) in world space. Applying a lightmap adds a node frame named
+FRAME_NAME to each material and remembers on the object what it changed, so `revert` restores the
+materials, slots and images exactly as they were.
+"""
+from __future__ import annotations
+
+import json
+from typing import Callable, Iterable, Optional
+
+import bpy
+import numpy as np
+
+from .errors import BakeError
+from .scene import AreaLight, BakeObject, PointLight, Scene, SpotLight, SunLight
+
+FRAME_NAME = "detp_bake lightmap"
+REVERT_KEY = "detp_bake_revert"
+DEFAULT_UV = "Lightmap"
+DEFAULT_ALBEDO = (0.8, 0.8, 0.8)
+
+
+# --------------------------------------------------------------------------- export
+
+def _is_visible(obj) -> bool:
+    return obj.visible_get() and not obj.hide_render
+
+
+def _socket(node, *names):
+    for name in names:
+        sock = node.inputs.get(name)
+        if sock is not None:
+            return sock
+    return None
+
+
+def _rgb(sock) -> np.ndarray:
+    v = sock.default_value
+    return np.array([v[0], v[1], v[2]], float) if hasattr(v, "__len__") else np.full(3, float(v))
+
+
+def _value(sock, default=0.0) -> float:
+    return float(sock.default_value) if sock is not None else default
+
+
+def _surface_shader(mat):
+    nt = mat.node_tree
+    outputs = [n for n in nt.nodes if n.type == "OUTPUT_MATERIAL"]
+    outputs.sort(key=lambda n: (not n.is_active_output, n.target not in ("ALL", "CYCLES")))
+    for out in outputs:
+        surf = out.inputs.get("Surface")
+        if surf is not None and surf.is_linked:
+            return surf.links[0].from_node
+    return None
+
+
+def material_albedo_emission(mat) -> tuple[np.ndarray, np.ndarray]:
+    """Diffuse albedo and emitted radiance of a material, from constant socket values."""
+    if mat is None:
+        return np.array(DEFAULT_ALBEDO), np.zeros(3)
+    if not (mat.use_nodes and mat.node_tree):
+        return np.array(mat.diffuse_color[:3], float), np.zeros(3)
+    node = _surface_shader(mat)
+    if node is None or node.type not in ("BSDF_PRINCIPLED", "BSDF_DIFFUSE", "EMISSION"):
+        found = [n for n in mat.node_tree.nodes if n.type in ("BSDF_PRINCIPLED", "BSDF_DIFFUSE")]
+        node = found[0] if found else node
+    if node is None:
+        return np.array(mat.diffuse_color[:3], float), np.zeros(3)
+    if node.type == "EMISSION":
+        return np.zeros(3), _rgb(node.inputs["Color"]) * _value(node.inputs.get("Strength"), 1.0)
+    if node.type == "BSDF_DIFFUSE":
+        return _rgb(node.inputs["Color"]), np.zeros(3)
+    if node.type == "BSDF_PRINCIPLED":
+        base = _rgb(node.inputs["Base Color"])
+        diffuse = base * (1.0 - _value(_socket(node, "Metallic"))) * \
+            (1.0 - _value(_socket(node, "Transmission Weight", "Transmission")))
+        colour = _socket(node, "Emission Color", "Emission")
+        emission = _rgb(colour) * _value(_socket(node, "Emission Strength"), 1.0) if colour else np.zeros(3)
+        return diffuse, emission
+    return np.array(mat.diffuse_color[:3], float), np.zeros(3)
+
+
+def ensure_lightmap_uv(obj, uv_name: str, margin: float = 1.0) -> bool:
+    """Create `uv_name` with Blender's Lightmap Pack when it is missing; keep the active UV layer.
+    Returns True when the layer was created."""
+    me = obj.data
+    if uv_name in me.uv_layers:
+        return False
+    previous = me.uv_layers.active.name if me.uv_layers.active else None
+    view_layer = bpy.context.view_layer
+    selected = [o for o in view_layer.objects if o.select_get()]
+    active = view_layer.objects.active
+    me.uv_layers.active = me.uv_layers.new(name=uv_name)
+    try:
+        for other in selected:
+            other.select_set(False)
+        obj.select_set(True)
+        view_layer.objects.active = obj
+        bpy.ops.object.mode_set(mode="EDIT")
+        bpy.ops.mesh.select_all(action="SELECT")
+        bpy.ops.uv.lightmap_pack(PREF_CONTEXT="ALL_FACES", PREF_PACK_IN_ONE=True,
+                                 PREF_NEW_UVLAYER=False, PREF_MARGIN_DIV=margin)
+        bpy.ops.object.mode_set(mode="OBJECT")
+    finally:
+        obj.select_set(False)
+        for other in selected:
+            other.select_set(True)
+        view_layer.objects.active = active
+    if previous is not None and previous in me.uv_layers:
+        me.uv_layers.active = me.uv_layers[previous]
+    return True
+
+
+def _mesh_arrays(obj, depsgraph, uv_name: Optional[str]):
+    """World-space triangles, corner normals, lightmap UVs and material index of one object."""
+    ev = obj.evaluated_get(depsgraph)
+    me = ev.to_mesh()
+    try:
+        me.calc_loop_triangles()
+        nt = len(me.loop_triangles)
+        co = np.empty(len(me.vertices) * 3, np.float64)
+        me.vertices.foreach_get("co", co)
+        tri_v = np.empty(nt * 3, np.int64)
+        me.loop_triangles.foreach_get("vertices", tri_v)
+        tri_l = np.empty(nt * 3, np.int64)
+        me.loop_triangles.foreach_get("loops", tri_l)
+        mat_index = np.empty(nt, np.int64)
+        me.loop_triangles.foreach_get("material_index", mat_index)
+        corner_n = np.empty(len(me.loops) * 3, np.float64)
+        me.corner_normals.foreach_get("vector", corner_n)
+        uv = np.zeros((len(me.loops), 2))
+        if uv_name is not None and uv_name in me.uv_layers:
+            flat = np.empty(len(me.loops) * 2, np.float64)
+            me.uv_layers[uv_name].uv.foreach_get("vector", flat)
+            uv = flat.reshape(-1, 2)
+    finally:
+        ev.to_mesh_clear()
+    m = np.array(obj.matrix_world, float)
+    pos = co.reshape(-1, 3)[tri_v.reshape(-1, 3)] @ m[:3, :3].T + m[:3, 3]
+    nm = np.linalg.inv(m[:3, :3]).T
+    nrm = corner_n.reshape(-1, 3)[tri_l.reshape(-1, 3)] @ nm.T
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=2, keepdims=True), 1e-30)
+    uvs = uv[tri_l.reshape(-1, 3)]
+    # Drop zero-area triangles: they carry no light and confuse the rasteriser.
+    area = np.linalg.norm(np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]), axis=1)
+    keep = area > 1e-12
+    return pos[keep], nrm[keep], uvs[keep], mat_index[keep]
+
+
+def _light(obj) -> Optional[object]:
+    light = obj.data
+    m = np.array(obj.matrix_world, float)
+    colour = np.array(light.color[:3], float)
+    energy = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
+    power = colour * energy
+    axis = m[:3, :3] @ np.array([0.0, 0.0, -1.0])
+    axis /= max(np.linalg.norm(axis), 1e-30)
+    if light.type == "POINT":
+        return PointLight(obj.name, m[:3, 3], power, float(light.shadow_soft_size))
+    if light.type == "SPOT":
+        return SpotLight(obj.name, m[:3, 3], axis, power, float(light.spot_size),
+                         float(light.spot_blend), float(light.shadow_soft_size))
+    if light.type == "SUN":
+        return SunLight(obj.name, axis, power, float(light.angle))
+    if light.type == "AREA":
+        return AreaLight(obj.name, m, light.shape, float(light.size), float(light.size_y), power)
+    return None
+
+
+def _world_radiance(world) -> np.ndarray:
+    if world is None:
+        return np.zeros(3)
+    if world.use_nodes and world.node_tree:
+        for node in world.node_tree.nodes:
+            if node.type == "OUTPUT_WORLD" and node.is_active_output:
+                surf = node.inputs.get("Surface")
+                if surf is not None and surf.is_linked and surf.links[0].from_node.type == "BACKGROUND":
+                    bg = surf.links[0].from_node
+                    return _rgb(bg.inputs["Color"]) * _value(bg.inputs.get("Strength"), 1.0)
+                return np.zeros(3)
+        return np.zeros(3)
+    return np.array(world.color[:3], float)
+
+
+def scene_bounces(bl_scene) -> int:
+    """Cycles' Light Paths › Diffuse bounces, capped by Total bounces."""
+    cycles = getattr(bl_scene, "cycles", None)
+    if cycles is None:
+        return 4
+    return int(min(cycles.diffuse_bounces, cycles.max_bounces))
+
+
+def export_scene(bl_scene, depsgraph, objects: Optional[Iterable[str]] = None,
+                 uv_layer: Optional[str] = None, resolution: int = 0,
+                 log: Callable[[str], None] = print) -> Scene:
+    """Every visible mesh becomes geometry; `objects` (default: all of them) get lightmaps from
+    `uv_layer`. A named `uv_layer` must exist on every baked object; with none, DEFAULT_UV is used
+    and created by Lightmap Pack where it is missing (and said so through `log`)."""
+    meshes = [o for o in bl_scene.objects if o.type == "MESH" and _is_visible(o)]
+    if objects is None:
+        targets = list(meshes)
+    else:
+        targets = []
+        for name in objects:
+            obj = bl_scene.objects.get(name)
+            if obj is None:
+                raise BakeError(f"object '{name}' is not in scene '{bl_scene.name}'")
+            if obj.type != "MESH":
+                raise BakeError(f"object '{name}' is a {obj.type.lower()}, not a mesh: it cannot be baked")
+            if obj not in meshes:
+                raise BakeError(f"object '{name}' is hidden: unhide it to bake it")
+            targets.append(obj)
+    if not targets:
+        raise BakeError(f"scene '{bl_scene.name}' has no visible mesh object to bake")
+    uv_name = uv_layer or DEFAULT_UV
+    for obj in targets:
+        if uv_name not in obj.data.uv_layers:
+            if uv_layer is not None:
+                raise BakeError(f"object '{obj.name}' has no UV layer '{uv_layer}'")
+    for obj in targets:
+        if ensure_lightmap_uv(obj, uv_name):
+            log(f"object '{obj.name}': created UV layer '{uv_name}' with Lightmap Pack")
+    depsgraph.update()
+
+    pos, nrm, uvs, alb, emi, objs = [], [], [], [], [], []
+    first = 0
+    target_set = set(o.name for o in targets)
+    for obj in meshes:
+        p, n, u, mi = _mesh_arrays(obj, depsgraph, uv_name if obj.name in target_set else None)
+        slots = [s.material for s in obj.material_slots] or [None]
+        table = [material_albedo_emission(m) for m in slots]
+        mi = np.clip(mi, 0, len(table) - 1)
+        alb.append(np.array([t[0] for t in table])[mi] if len(p) else np.zeros((0, 3)))
+        emi.append(np.array([t[1] for t in table])[mi] if len(p) else np.zeros((0, 3)))
+        pos.append(p)
+        nrm.append(n)
+        uvs.append(u)
+        bake = obj.name in target_set
+        if bake and len(p) == 0:
+            raise BakeError(f"object '{obj.name}' has no faces to bake")
+        objs.append(BakeObject(obj.name, first, len(p), resolution, bake))
+        first += len(p)
+    lights = [l for l in (_light(o) for o in bl_scene.objects if o.type == "LIGHT" and _is_visible(o))
+              if l is not None]
+    return Scene(positions=np.concatenate(pos), normals=np.concatenate(nrm),
+                 uvs=np.concatenate(uvs), albedo=np.concatenate(alb), emission=np.concatenate(emi),
+                 objects=objs, lights=lights, world=_world_radiance(bl_scene.world),
+                 default_bounces=scene_bounces(bl_scene))
+
+
+# --------------------------------------------------------------------------- images and materials
+
+def load_image(path: str, name: str):
+    """Load (or reload) a baked EXR as a linear image datablock named `name`."""
+    img = bpy.data.images.get(name)
+    if img is not None and bpy.path.abspath(img.filepath) == path:
+        img.reload()
+        return img
+    img = bpy.data.images.load(path, check_existing=False)
+    img.name = name
+    img.colorspace_settings.is_data = False
+    return img
+
+
+def _base_colour_source(nt):
+    """The socket or constant feeding the surface's base colour."""
+    for node in nt.nodes:
+        if node.type in ("BSDF_PRINCIPLED", "BSDF_DIFFUSE"):
+            sock = node.inputs["Base Color" if node.type == "BSDF_PRINCIPLED" else "Color"]
+            if sock.is_linked:
+                return sock.links[0].from_socket, None
+            return None, tuple(sock.default_value)
+    return None, (0.8, 0.8, 0.8, 1.0)
+
+
+def _wire(mat, image, uv_name: str) -> None:
+    """Add the lightmap frame: UV Map → Image × base colour → Emission → an EEVEE output made
+    active, so the viewport shows the baked lighting while Cycles keeps the original shading."""
+    nt = mat.node_tree
+    previous = [n.name for n in nt.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output]
+    src, const = _base_colour_source(nt)
+    frame = nt.nodes.new("NodeFrame")
+    frame.name = frame.label = FRAME_NAME
+    x0 = max((n.location.x for n in nt.nodes if n is not frame), default=0.0) + 300.0
+    uv = nt.nodes.new("ShaderNodeUVMap")
+    uv.uv_map = uv_name
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.interpolation = "Linear"
+    mix = nt.nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    mix.blend_type = "MULTIPLY"
+    mix.inputs["Factor"].default_value = 1.0
+    emit = nt.nodes.new("ShaderNodeEmission")
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    out.target = "EEVEE"
+    for i, node in enumerate((uv, tex, mix, emit, out)):
+        node.parent = frame
+        node.location = (x0 + 250.0 * i, -400.0)
+    nt.links.new(uv.outputs["UV"], tex.inputs["Vector"])
+    a, b = mix.inputs[6], mix.inputs[7]  # the RGBA pair of ShaderNodeMix
+    if src is not None:
+        nt.links.new(src, a)
+    else:
+        a.default_value = const
+    nt.links.new(tex.outputs["Color"], b)
+    nt.links.new(mix.outputs[2], emit.inputs["Color"])
+    nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
+    out.is_active_output = True
+    mat[REVERT_KEY] = json.dumps({"active_outputs": previous})
+
+
+def _unwire(mat) -> None:
+    nt = mat.node_tree
+    frame = nt.nodes.get(FRAME_NAME)
+    if frame is not None:
+        for node in [n for n in nt.nodes if n.parent == frame]:
+            nt.nodes.remove(node)
+        nt.nodes.remove(frame)
+    state = json.loads(mat.get(REVERT_KEY, "{}"))
+    for name in state.get("active_outputs", []):
+        node = nt.nodes.get(name)
+        if node is not None:
+            node.is_active_output = True
+    if REVERT_KEY in mat:
+        del mat[REVERT_KEY]
+
+
+def apply_lightmap(obj, image, uv_name: str, shared: bool = False) -> None:
+    """Show `image` on `obj`'s materials. A material other baked objects also use is copied for
+    this object (`shared`), an empty slot gets a new material; all of it is undone by revert."""
+    revert(obj)
+    record = {"slots": [], "added_slots": 0, "image": image.name}
+    if not obj.material_slots:
+        obj.data.materials.append(None)
+        record["added_slots"] = 1
+    for index, slot in enumerate(obj.material_slots):
+        original = slot.material
+        if original is None:
+            mat = bpy.data.materials.new(f"{obj.name} lightmap")
+            mat.use_nodes = True
+            record["slots"].append([index, None, mat.name, slot.link])
+            slot.material = mat
+        elif shared or not original.use_nodes:
+            mat = original.copy()
+            mat.name = f"{original.name} ({obj.name} lightmap)"
+            mat.use_nodes = True
+            record["slots"].append([index, original.name, mat.name, slot.link])
+            slot.material = mat
+        else:
+            mat = original
+            record["slots"].append([index, original.name, None, slot.link])
+        if mat.node_tree.nodes.get(FRAME_NAME) is None:
+            _wire(mat, image, uv_name)
+    obj[REVERT_KEY] = json.dumps(record)
+
+
+def revert(obj) -> bool:
+    """Undo `apply_lightmap` on one object exactly; False when there was nothing to undo."""
+    if REVERT_KEY not in obj:
+        return False
+    record = json.loads(obj[REVERT_KEY])
+    for index, original, copy, link in record["slots"]:
+        slot = obj.material_slots[index] if index < len(obj.material_slots) else None
+        if copy is not None:
+            made = bpy.data.materials.get(copy)
+            if slot is not None:
+                slot.material = bpy.data.materials.get(original) if original else None
+            if made is not None and made.users == 0:
+                bpy.data.materials.remove(made)
+        elif original is not None:
+            mat = bpy.data.materials.get(original)
+            if mat is not None and mat.node_tree:
+                _unwire(mat)
+    for _ in range(record.get("added_slots", 0)):
+        obj.data.materials.pop()
+    del obj[REVERT_KEY]
+    img = bpy.data.images.get(record.get("image", ""))
+    if img is not None and img.users == 0:
+        bpy.data.images.remove(img)
+    return True
+
+
+def apply_all(bl_scene, files: dict, uv_layer: Optional[str], estimator: str) -> list:
+    """Load each baked EXR and wire it into its object's materials; returns the objects."""
+    uv_name = uv_layer or DEFAULT_UV
+    objs = [bl_scene.objects[name] for name in files]
+    users: dict = {}
+    for obj in objs:
+        for slot in obj.material_slots:
+            if slot.material is not None:
+                users.setdefault(slot.material.name, set()).add(obj.name)
+    for obj in objs:
+        exr = [p for p in files[obj.name] if p.endswith(".exr")]
+        if not exr:
+            raise BakeError("applying lightmaps needs the EXR format in 'formats'")
+        image = load_image(exr[0], f"{obj.name}.{estimator}")
+        shared = any(len(users.get(s.material.name, ())) > 1 for s in obj.material_slots if s.material)
+        apply_lightmap(obj, image, uv_name, shared)
+    return objs

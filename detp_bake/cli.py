@@ -1,0 +1,135 @@
+"""Command line: `python -m detp_bake bake SCENE.blend ...` with the bpy wheel, and the same
+parser behind Blender's `blender -b SCENE.blend -c detp_bake bake ...`.
+
+Every check that can fail (settings, the .blend path, the output folder, object names, UV layers)
+runs before tracing starts; progress goes to stderr, the report path to stdout.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Optional, Sequence
+
+from . import __version__, bake as bake_mod, images
+from .errors import BakeCancelled, BakeError
+from .estimators import EstimatorSettings, names as estimator_names
+
+
+def build_parser(prog: str = "python -m detp_bake", with_scene_path: bool = True) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=prog, description="Bake diffuse irradiance lightmaps "
+                                     "with photon density estimation (DETP).")
+    parser.add_argument("--version", action="version", version=f"detp_bake {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    b = sub.add_parser("bake", help="bake lightmaps for a .blend file")
+    if with_scene_path:
+        b.add_argument("scene", help="the .blend file to bake")
+    b.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake (default: all visible meshes)")
+    b.add_argument("--estimator", default="photon_map", help=f"one of: {', '.join(estimator_names())}")
+    b.add_argument("--photons", type=int, default=1_000_000, help="photons to trace (default 1M)")
+    b.add_argument("--k", type=int, default=100, help="photon map neighbours (default 100)")
+    b.add_argument("--radius-texels", type=float, default=1.5, help="DETP disc radius in texels (default 1.5)")
+    b.add_argument("--radius", type=float, default=None, help="DETP disc radius in metres (overrides texels)")
+    b.add_argument("--q", type=float, default=0.65, help="sphere cache radius ratio (default 0.65)")
+    b.add_argument("--kernel", default="constant", choices=("constant", "epanechnikov"))
+    b.add_argument("--resolution", type=int, default=128, help="lightmap size in pixels (default 128)")
+    b.add_argument("--margin", type=int, default=16, help="dilation margin in pixels (default 16)")
+    b.add_argument("--bounces", type=int, default=None,
+                   help="diffuse bounces (default: the scene's Cycles Light Paths › Diffuse)")
+    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--threads", type=int, default=0, help="0 = all cores")
+    b.add_argument("--uv-layer", default=None,
+                   help="lightmap UV layer (default 'Lightmap', created with Lightmap Pack if missing)")
+    b.add_argument("--out", required=True, help="output folder")
+    b.add_argument("--format", default="exr", help="comma-separated: exr,png (default exr)")
+    b.add_argument("--half", action="store_true", help="write half-float EXR")
+    b.add_argument("--apply", action="store_true", help="wire the lightmaps into the materials")
+    b.add_argument("--save", default=None, metavar="OUT.blend", help="save the baked .blend here")
+    return parser
+
+
+def settings_from_args(args) -> bake_mod.BakeSettings:
+    formats = tuple(f.strip().lower() for f in args.format.split(",") if f.strip())
+    return bake_mod.BakeSettings(
+        estimator=args.estimator, photons=args.photons, bounces=args.bounces, seed=args.seed,
+        resolution=args.resolution, margin=args.margin, formats=formats, half=args.half,
+        threads=args.threads,
+        estimator_settings=EstimatorSettings(k=args.k, radius_texels=args.radius_texels,
+                                             radius=args.radius, q=args.q, kernel=args.kernel))
+
+
+class StderrProgress:
+    """Progress lines on stderr, at most one per phase every `interval` seconds."""
+
+    def __init__(self, interval: float = 2.0):
+        self.interval = interval
+        self.last: dict = {}
+
+    def __call__(self, p: bake_mod.Progress) -> None:
+        now = time.monotonic()
+        if p.fraction >= 1.0 or now - self.last.get(p.phase, -1e9) >= self.interval:
+            self.last[p.phase] = now
+            print(f"detp_bake: {p.message}", file=sys.stderr, flush=True)
+
+
+def run_bake(args, bl_scene=None) -> int:
+    """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene)."""
+    settings = settings_from_args(args)
+    settings.validate()
+    if args.apply and "exr" not in settings.formats:
+        raise BakeError("--apply needs the exr format in --format")
+    out_dir = images.check_writable_dir(args.out)
+    if args.save:
+        images.check_writable_dir(Path(args.save).resolve().parent)
+    try:
+        import bpy
+    except ImportError:
+        raise BakeError("the 'bpy' module is not installed: run inside Blender or install the bpy wheel "
+                        "(make demo sets one up)") from None
+    from . import blender_scene
+    if bl_scene is None:
+        path = Path(args.scene)
+        if not path.is_file() or not os.access(path, os.R_OK):
+            raise BakeError(f"cannot read scene file '{path}'")
+        try:
+            bpy.ops.wm.open_mainfile(filepath=str(path.resolve()))
+        except RuntimeError as exc:
+            raise BakeError(f"cannot open scene file '{path}': {exc}") from None
+        bl_scene = bpy.context.scene
+    t0 = time.perf_counter()
+    log = lambda msg: print(f"detp_bake: {msg}", file=sys.stderr, flush=True)
+    scene = blender_scene.export_scene(bl_scene, bpy.context.evaluated_depsgraph_get(), args.objects,
+                                       args.uv_layer, settings.resolution, log)
+    export_seconds = time.perf_counter() - t0
+    log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
+        f"baking {sum(o.bake for o in scene.objects)} objects with {settings.estimator}")
+    result = bake_mod.bake(scene, settings, out_dir, StderrProgress(), export_seconds=export_seconds)
+    if args.apply:
+        blender_scene.apply_all(bl_scene, result.files, args.uv_layer, settings.estimator)
+    if args.save:
+        bpy.ops.wm.save_as_mainfile(filepath=str(Path(args.save).resolve()), copy=False)
+        print(f"detp_bake: saved {args.save}", file=sys.stderr)
+    for name, files in result.files.items():
+        for f in files:
+            print(f)
+    print(out_dir / "report.json")
+    if args.save:
+        print(Path(args.save).resolve())
+    return 0
+
+
+def main(argv: Optional[Sequence[str]] = None, bl_scene=None) -> int:
+    parser = build_parser(with_scene_path=bl_scene is None)
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "bake":
+            return run_bake(args, bl_scene)
+    except BakeError as exc:
+        print(f"detp_bake: error: {exc}", file=sys.stderr)
+        return 2
+    except BakeCancelled:
+        print("detp_bake: cancelled; nothing written", file=sys.stderr)
+        return 130
+    return 1

@@ -1,0 +1,76 @@
+"""Density estimators, registered by name.
+
+Every estimator has one shape: built from the texels and the settings, it is fed photon batches as
+they are traced (`add`), then `finish` returns the irradiance E (W/m², RGB) at every texel and a
+dict of counters for report.json. Streaming estimators do their work in `add`, so memory stays
+bounded whatever the photon count; others keep what they need until `finish`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+import numpy as np
+
+from ..errors import BakeError
+from ..photons import PhotonBatch
+from ..texels import TexelSet
+
+
+@dataclass
+class EstimatorSettings:
+    k: int = 100  # photon map: neighbours
+    normal_agreement: float = 0.8  # photon map: min cos between hit and texel normals
+    radius_texels: float = 1.5  # DETP family: disc radius in texels of each lightmap
+    radius: Optional[float] = None  # DETP family: disc radius in metres (overrides texels)
+    q: float = 0.65  # sphere cache: ratio of successive sphere radii
+    kernel: str = "constant"  # DETP family: constant or epanechnikov
+
+
+@dataclass
+class Estimate:
+    irradiance: np.ndarray  # (N, 3) float64, W/m²
+    counters: dict = field(default_factory=dict)
+
+
+class Estimator:
+    """Base class: subclasses set `name` and implement `add` and `finish`."""
+    name = ""
+    streaming = False  # True when `add` consumes a batch completely
+
+    def __init__(self, texels: TexelSet, settings: EstimatorSettings,
+                 progress: Optional[Callable[[float], None]] = None):
+        self.texels = texels
+        self.settings = settings
+        self.progress = progress or (lambda fraction: None)
+
+    def add(self, batch: PhotonBatch) -> None:
+        raise NotImplementedError
+
+    def finish(self) -> Estimate:
+        raise NotImplementedError
+
+
+REGISTRY: dict[str, type[Estimator]] = {}
+
+
+def register(cls: type[Estimator]) -> type[Estimator]:
+    REGISTRY[cls.name] = cls
+    return cls
+
+
+def names() -> list[str]:
+    _load_all()
+    return list(REGISTRY)
+
+
+def create(name: str, texels: TexelSet, settings: EstimatorSettings,
+           progress: Optional[Callable[[float], None]] = None) -> Estimator:
+    _load_all()
+    if name not in REGISTRY:
+        raise BakeError(f"unknown estimator '{name}' (choose one of: {', '.join(REGISTRY)})")
+    return REGISTRY[name](texels, settings, progress)
+
+
+def _load_all() -> None:
+    from . import photon_map  # noqa: F401  (registers itself)

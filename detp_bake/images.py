@@ -1,0 +1,88 @@
+"""Lightmap files through OpenImageIO: float EXR for the data, an sRGB PNG to look at.
+
+Arrays here are (H, W, C) with row 0 at the bottom (v = 0), as the texels are laid out and as
+Blender stores `Image.pixels`; files are written top row first, as every image viewer expects.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .errors import BakeError
+
+
+def _oiio():
+    import OpenImageIO as oiio
+    return oiio
+
+
+def write_exr(path: str | os.PathLike, image: np.ndarray, half: bool = False) -> None:
+    oiio = _oiio()
+    data = np.ascontiguousarray(image[::-1], np.float32)
+    h, w, c = data.shape
+    spec = oiio.ImageSpec(w, h, c, "half" if half else "float")
+    spec.attribute("compression", "zip")
+    _write(oiio, path, spec, data)
+
+
+def linear_to_srgb(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def write_png(path: str | os.PathLike, image: np.ndarray) -> None:
+    """8-bit sRGB preview of linear values (1.0 = white), clipped."""
+    oiio = _oiio()
+    data = np.ascontiguousarray(np.round(linear_to_srgb(image[::-1]) * 255.0), np.uint8)
+    h, w, c = data.shape
+    _write(oiio, path, oiio.ImageSpec(w, h, c, "uint8"), data)
+
+
+def _write(oiio, path, spec, data) -> None:
+    path = str(path)
+    out = oiio.ImageOutput.create(path)
+    if out is None or not out.open(path, spec):
+        raise BakeError(f"cannot write image '{path}': {oiio.geterror()}")
+    try:
+        if not out.write_image(data):
+            raise BakeError(f"cannot write image '{path}': {out.geterror()}")
+    finally:
+        out.close()
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """(H, W, C) float32 with row 0 at the bottom."""
+    oiio = _oiio()
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise BakeError(f"cannot read image '{path}': {oiio.geterror()}")
+    try:
+        data = inp.read_image("float")
+    finally:
+        inp.close()
+    return np.ascontiguousarray(np.asarray(data, np.float32)[::-1])
+
+
+WRITERS = {"exr": write_exr, "png": write_png}
+
+
+def file_stem(name: str) -> str:
+    """An object name made safe as a file name on every platform."""
+    bad = '<>:"/\\|?*'
+    stem = "".join("_" if (ch in bad or ord(ch) < 32) else ch for ch in name).strip(" .")
+    return stem or "object"
+
+
+def check_writable_dir(path: str | os.PathLike) -> Path:
+    """Create the output folder if needed and prove it is writable, before any long work."""
+    p = Path(path)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+        probe = p / f".detp_bake_probe_{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise BakeError(f"output directory '{p}' is not writable: {exc.strerror or exc}") from None
+    return p

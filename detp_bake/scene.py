@@ -1,0 +1,147 @@
+"""Plain scene data: what the photon tracer and the texel rasteriser need, and nothing of Blender.
+
+The Blender adapter (`blender_scene.py`) fills these dataclasses; tests build them by hand. All
+geometry is in world space, metres; colours are linear RGB; powers are watts as Cycles reads them
+(see DESIGN.md §3 and `lights.py` for the exact conventions).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Union
+
+import numpy as np
+
+from .errors import BakeError
+
+
+@dataclass
+class PointLight:
+    """Isotropic: intensity power/(4π) W/sr. radius > 0 makes it a sphere light of the same power."""
+    name: str
+    position: np.ndarray
+    power: np.ndarray  # RGB watts
+    radius: float = 0.0
+
+
+@dataclass
+class SpotLight:
+    """A point light's intensity inside a cone around `direction`, smoothed by `blend` at its rim."""
+    name: str
+    position: np.ndarray
+    direction: np.ndarray  # unit axis of the cone, the way light travels
+    power: np.ndarray
+    spot_size: float  # full cone angle, radians
+    blend: float = 0.0
+    radius: float = 0.0
+
+
+@dataclass
+class SunLight:
+    """Parallel light: `irradiance` W/m² on a surface facing it; `angle` is the disc's full angle."""
+    name: str
+    direction: np.ndarray  # unit, the way light travels
+    irradiance: np.ndarray
+    angle: float = 0.0
+
+
+@dataclass
+class AreaLight:
+    """One-sided Lambertian emitter facing the local -Z axis of `matrix`; emits exactly `power`."""
+    name: str
+    matrix: np.ndarray  # 4x4 world matrix (scale included)
+    shape: str  # SQUARE, RECTANGLE, DISK, ELLIPSE
+    size_x: float
+    size_y: float
+    power: np.ndarray
+
+
+Light = Union[PointLight, SpotLight, SunLight, AreaLight]
+
+
+@dataclass
+class BakeObject:
+    """A run of consecutive triangles that belongs to one object; `bake` objects get a lightmap."""
+    name: str
+    first_triangle: int
+    triangle_count: int
+    resolution: int = 0
+    bake: bool = True
+
+    @property
+    def triangles(self) -> slice:
+        return slice(self.first_triangle, self.first_triangle + self.triangle_count)
+
+
+@dataclass
+class Scene:
+    """Triangles with per-corner shading normals and lightmap UVs, per-triangle materials, lights.
+
+    positions: (T, 3, 3) corner positions; normals: (T, 3, 3) corner shading normals;
+    uvs: (T, 3, 2) lightmap UVs in [0, 1]; albedo: (T, 3) diffuse reflectance;
+    emission: (T, 3) emitted radiance W/(m² sr) (front face); world: constant sky radiance.
+    """
+    positions: np.ndarray
+    normals: np.ndarray
+    uvs: np.ndarray
+    albedo: np.ndarray
+    emission: np.ndarray
+    objects: list[BakeObject]
+    lights: list[Light] = field(default_factory=list)
+    world: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    default_bounces: int = 4
+
+    @property
+    def triangle_count(self) -> int:
+        return len(self.positions)
+
+    def bounds(self) -> tuple[np.ndarray, float]:
+        """Centre and radius of a sphere around all geometry and positional lights."""
+        pts = [self.positions.reshape(-1, 3)]
+        for light in self.lights:
+            if isinstance(light, (PointLight, SpotLight)):
+                pts.append(np.asarray(light.position, float).reshape(1, 3))
+            elif isinstance(light, AreaLight):
+                pts.append(np.asarray(light.matrix, float)[:3, 3].reshape(1, 3))
+        pts = np.concatenate(pts).astype(np.float64)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        centre = 0.5 * (lo + hi)
+        radius = float(np.linalg.norm(hi - lo)) * 0.5
+        return centre, max(radius, 1e-3) * 1.01
+
+    def object_named(self, name: str) -> BakeObject:
+        for obj in self.objects:
+            if obj.name == name:
+                return obj
+        raise BakeError(f"object '{name}' is not in the scene")
+
+    def check(self) -> None:
+        """Raise BakeError for data that would make the bake meaningless, naming the culprit."""
+        t = self.triangle_count
+        for name, arr, shape in (("positions", self.positions, (t, 3, 3)),
+                                 ("normals", self.normals, (t, 3, 3)),
+                                 ("uvs", self.uvs, (t, 3, 2)),
+                                 ("albedo", self.albedo, (t, 3)),
+                                 ("emission", self.emission, (t, 3))):
+            if arr.shape != shape:
+                raise BakeError(f"scene {name} has shape {arr.shape}, expected {shape}")
+            if not np.all(np.isfinite(arr)):
+                raise BakeError(f"scene {name} contains NaN or infinite values")
+        covered = np.zeros(t, bool)
+        for obj in self.objects:
+            if obj.first_triangle < 0 or obj.first_triangle + obj.triangle_count > t:
+                raise BakeError(f"object '{obj.name}' refers to triangles outside the scene")
+            covered[obj.triangles] = True
+        if t and not covered.all():
+            raise BakeError("some triangles belong to no object")
+        if not any(o.bake for o in self.objects):
+            raise BakeError("no object to bake: select or include at least one mesh object")
+        for obj in self.objects:
+            if obj.bake and obj.triangle_count == 0:
+                raise BakeError(f"object '{obj.name}' has no faces to bake")
+
+    def object_index(self) -> np.ndarray:
+        """Index into `objects` for every triangle."""
+        idx = np.empty(self.triangle_count, np.int32)
+        for i, obj in enumerate(self.objects):
+            idx[obj.triangles] = i
+        return idx

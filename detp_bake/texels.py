@@ -1,0 +1,207 @@
+"""Lightmap texels: which surface point each texel stands for, and filling the gutter afterwards.
+
+Rasterisation is conservative: a texel counts as covered when its square can touch a UV triangle
+(centre within half a diagonal of it), so texels along chart borders are baked too and no black
+seams appear under bilinear filtering. A covered texel takes the triangle nearest its centre and the
+nearest point of that triangle, so its world position always lies on the surface.
+
+Image layout: texel (i, j) has its centre at UV ((i + ½)/W, (j + ½)/H); row j = 0 is v = 0, the
+bottom row, as in Blender's `Image.pixels`. Files are written top row first (see images.py).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from .errors import BakeError
+from .scene import Scene
+
+HALF_DIAGONAL_SQ = 0.5  # (√2 / 2)², in texel units
+
+
+@dataclass
+class Lightmap:
+    """One object's image and its run of texels in the TexelSet."""
+    name: str
+    object_index: int
+    width: int
+    height: int
+    offset: int
+    count: int
+    texel_size: float  # world metres per texel (area-weighted over the object)
+
+    @property
+    def texels(self) -> slice:
+        return slice(self.offset, self.offset + self.count)
+
+
+@dataclass
+class TexelSet:
+    """All covered texels of all baked objects, concatenated object by object."""
+    position: np.ndarray  # (N, 3) float64, on the surface
+    normal: np.ndarray  # (N, 3) float64, unit shading normal
+    triangle: np.ndarray  # (N,) int32
+    pixel: np.ndarray  # (N,) int64, j * W + i within its lightmap
+    inside: np.ndarray  # (N,) bool: the centre lies inside its UV triangle
+    area: np.ndarray  # (N,) world area one texel covers on its triangle
+    lightmaps: list[Lightmap]
+
+    def __len__(self) -> int:
+        return len(self.pixel)
+
+    def per_texel(self, per_lightmap: np.ndarray) -> np.ndarray:
+        """Broadcast one value per lightmap to one per texel."""
+        return np.repeat(np.asarray(per_lightmap, np.float64), [lm.count for lm in self.lightmaps])
+
+
+@numba.njit(cache=True)
+def _closest_on_triangle(px, py, ax, ay, bx, by, cx, cy):
+    """Barycentrics (of A, B, C) of the point of triangle ABC nearest P, in 2D (Ericson §5.1.5)."""
+    abx, aby, acx, acy = bx - ax, by - ay, cx - ax, cy - ay
+    apx, apy = px - ax, py - ay
+    d1 = abx * apx + aby * apy
+    d2 = acx * apx + acy * apy
+    if d1 <= 0.0 and d2 <= 0.0:
+        return 1.0, 0.0, 0.0
+    bpx, bpy = px - bx, py - by
+    d3 = abx * bpx + aby * bpy
+    d4 = acx * bpx + acy * bpy
+    if d3 >= 0.0 and d4 <= d3:
+        return 0.0, 1.0, 0.0
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return 1.0 - v, v, 0.0
+    cpx, cpy = px - cx, py - cy
+    d5 = abx * cpx + aby * cpy
+    d6 = acx * cpx + acy * cpy
+    if d6 >= 0.0 and d5 <= d6:
+        return 0.0, 0.0, 1.0
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return 1.0 - w, 0.0, w
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return 0.0, 1.0 - w, w
+    denom = 1.0 / (va + vb + vc)
+    v = vb * denom
+    w = vc * denom
+    return 1.0 - v - w, v, w
+
+
+@numba.njit(cache=True)
+def _rasterise(uv, width, height, best_tri, best_d2, bary):
+    """For each texel, the UV triangle nearest its centre within half a texel diagonal."""
+    for t in range(uv.shape[0]):
+        ax, ay = uv[t, 0, 0] * width, uv[t, 0, 1] * height
+        bx, by = uv[t, 1, 0] * width, uv[t, 1, 1] * height
+        cx, cy = uv[t, 2, 0] * width, uv[t, 2, 1] * height
+        if abs((bx - ax) * (cy - ay) - (by - ay) * (cx - ax)) <= 1e-12:
+            continue
+        i0 = max(0, int(np.floor(min(ax, min(bx, cx)) - 1.5)))
+        i1 = min(width - 1, int(np.ceil(max(ax, max(bx, cx)) + 0.5)))
+        j0 = max(0, int(np.floor(min(ay, min(by, cy)) - 1.5)))
+        j1 = min(height - 1, int(np.ceil(max(ay, max(by, cy)) + 0.5)))
+        for j in range(j0, j1 + 1):
+            py = j + 0.5
+            for i in range(i0, i1 + 1):
+                px = i + 0.5
+                w0, w1, w2 = _closest_on_triangle(px, py, ax, ay, bx, by, cx, cy)
+                qx = w0 * ax + w1 * bx + w2 * cx
+                qy = w0 * ay + w1 * by + w2 * cy
+                d2 = (qx - px) ** 2 + (qy - py) ** 2
+                k = j * width + i
+                if d2 <= HALF_DIAGONAL_SQ and d2 < best_d2[k] - 1e-12:
+                    best_d2[k] = d2
+                    best_tri[k] = t
+                    bary[k, 0], bary[k, 1], bary[k, 2] = w0, w1, w2
+
+
+def rasterise(scene: Scene) -> TexelSet:
+    """Texels of every object with `bake` set, at its `resolution` (square lightmaps)."""
+    parts = []
+    lightmaps: list[Lightmap] = []
+    offset = 0
+    world_area = 0.5 * np.linalg.norm(np.cross(scene.positions[:, 1] - scene.positions[:, 0],
+                                               scene.positions[:, 2] - scene.positions[:, 0]), axis=1)
+    uv = scene.uvs.astype(np.float64)
+    uv_area = 0.5 * np.abs((uv[:, 1, 0] - uv[:, 0, 0]) * (uv[:, 2, 1] - uv[:, 0, 1])
+                           - (uv[:, 1, 1] - uv[:, 0, 1]) * (uv[:, 2, 0] - uv[:, 0, 0]))
+    for index, obj in enumerate(scene.objects):
+        if not obj.bake:
+            continue
+        res = int(obj.resolution)
+        if res <= 0:
+            raise BakeError(f"object '{obj.name}': lightmap resolution must be positive, got {res}")
+        sl = obj.triangles
+        best_tri = np.full(res * res, -1, np.int32)
+        best_d2 = np.full(res * res, np.inf)
+        bary = np.zeros((res * res, 3))
+        _rasterise(np.ascontiguousarray(uv[sl]), res, res, best_tri, best_d2, bary)
+        pixel = np.flatnonzero(best_tri >= 0)
+        if pixel.size == 0:
+            raise BakeError(f"object '{obj.name}': its lightmap UVs cover no texel at {res}x{res} "
+                            "(are the UVs all zero or outside 0..1?)")
+        tri = best_tri[pixel] + obj.first_triangle
+        w = bary[pixel]
+        pos = np.einsum("nk,nkc->nc", w, scene.positions[tri].astype(np.float64))
+        nrm = np.einsum("nk,nkc->nc", w, scene.normals[tri].astype(np.float64))
+        length = np.linalg.norm(nrm, axis=1)
+        # Degenerate shading normals fall back to the face normal.
+        face = np.cross(scene.positions[tri, 1] - scene.positions[tri, 0],
+                        scene.positions[tri, 2] - scene.positions[tri, 0]).astype(np.float64)
+        bad = length < 1e-8
+        nrm[bad] = face[bad]
+        nrm /= np.maximum(np.linalg.norm(nrm, axis=1), 1e-30)[:, None]
+        tri_uv_texels = uv_area[tri] * res * res
+        area = world_area[tri] / np.maximum(tri_uv_texels, 1e-30)
+        obj_uv = uv_area[sl].sum() * res * res
+        texel_size = float(np.sqrt(world_area[sl].sum() / obj_uv)) if obj_uv > 0 else 0.0
+        lightmaps.append(Lightmap(obj.name, index, res, res, offset, len(pixel), texel_size))
+        parts.append((pos, nrm, tri.astype(np.int32), pixel.astype(np.int64), best_d2[pixel] == 0.0, area))
+        offset += len(pixel)
+    if not parts:
+        raise BakeError("no object to bake")
+    cat = [np.concatenate(x) for x in zip(*parts)]
+    return TexelSet(*cat, lightmaps=lightmaps)
+
+
+def to_image(values: np.ndarray, lm: Lightmap, pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Scatter one lightmap's texel values into an (H, W, C) image (row 0 = bottom) and its mask."""
+    c = values.shape[1]
+    img = np.zeros((lm.height * lm.width, c), np.float32)
+    mask = np.zeros(lm.height * lm.width, bool)
+    img[pixel] = values
+    mask[pixel] = True
+    return img.reshape(lm.height, lm.width, c), mask.reshape(lm.height, lm.width)
+
+
+def dilate(image: np.ndarray, mask: np.ndarray, margin: int) -> np.ndarray:
+    """Grow covered texels outwards by `margin` pixels: each empty texel next to covered ones
+    takes their mean, ring by ring, as Blender's bake margin (extend) does."""
+    img = image.astype(np.float32, copy=True)
+    filled = mask.copy()
+    h, w = filled.shape
+    for _ in range(int(margin)):
+        if filled.all():
+            break
+        acc = np.zeros_like(img)
+        cnt = np.zeros((h, w), np.float32)
+        pi = np.pad(img * filled[..., None], ((1, 1), (1, 1), (0, 0)))
+        pf = np.pad(filled.astype(np.float32), 1)
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                if dy == 0 and dx == 0:
+                    continue
+                acc += pi[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+                cnt += pf[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+        grow = (~filled) & (cnt > 0)
+        if not grow.any():
+            break
+        img[grow] = acc[grow] / cnt[grow][:, None]
+        filled = filled | grow
+    return img
