@@ -24,6 +24,13 @@ DEFAULT_ALBEDO = (0.8, 0.8, 0.8)
 
 # --------------------------------------------------------------------------- export
 
+def _has_nodes(idblock) -> bool:
+    """Node-based shading in use (`use_nodes` is deprecated in Blender 5, where it always is)."""
+    if idblock.node_tree is None:
+        return False
+    return bpy.app.version >= (5, 0, 0) or bool(idblock.use_nodes)
+
+
 def _is_visible(obj) -> bool:
     return obj.visible_get() and not obj.hide_render
 
@@ -60,7 +67,7 @@ def material_albedo_emission(mat) -> tuple[np.ndarray, np.ndarray]:
     """Diffuse albedo and emitted radiance of a material, from constant socket values."""
     if mat is None:
         return np.array(DEFAULT_ALBEDO), np.zeros(3)
-    if not (mat.use_nodes and mat.node_tree):
+    if not _has_nodes(mat):
         return np.array(mat.diffuse_color[:3], float), np.zeros(3)
     node = _surface_shader(mat)
     if node is None or node.type not in ("BSDF_PRINCIPLED", "BSDF_DIFFUSE", "EMISSION"):
@@ -154,6 +161,16 @@ def _light(obj) -> Optional[object]:
     m = np.array(obj.matrix_world, float)
     colour = np.array(light.color[:3], float)
     energy = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
+    if not getattr(light, "normalize", True):
+        # Unnormalised lights keep their radiance as the size changes (measured in Cycles).
+        if light.type in ("POINT", "SPOT"):
+            r = float(light.shadow_soft_size)
+            energy *= 4.0 * np.pi * r * r if r > 0 else 4.0
+        elif light.type == "AREA":
+            sx = float(light.size) * float(np.linalg.norm(m[:3, 0]))
+            sy = float(light.size if light.shape in ("SQUARE", "DISK") else light.size_y) * \
+                float(np.linalg.norm(m[:3, 1]))
+            energy *= sx * sy * (np.pi / 4 if light.shape in ("DISK", "ELLIPSE") else 1.0)
     power = colour * energy
     axis = m[:3, :3] @ np.array([0.0, 0.0, -1.0])
     axis /= max(np.linalg.norm(axis), 1e-30)
@@ -172,7 +189,7 @@ def _light(obj) -> Optional[object]:
 def _world_radiance(world) -> np.ndarray:
     if world is None:
         return np.zeros(3)
-    if world.use_nodes and world.node_tree:
+    if _has_nodes(world):
         for node in world.node_tree.nodes:
             if node.type == "OUTPUT_WORLD" and node.is_active_output:
                 surf = node.inputs.get("Surface")
@@ -328,6 +345,12 @@ def _unwire(mat) -> None:
         del mat[REVERT_KEY]
 
 
+def _use_nodes(mat) -> None:
+    """Blender 5 gives every material a node tree and deprecates `use_nodes`."""
+    if mat.node_tree is None or bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+
+
 def apply_lightmap(obj, image, uv_name: str, shared: bool = False) -> None:
     """Show `image` on `obj`'s materials. A material other baked objects also use is copied for
     this object (`shared`), an empty slot gets a new material; all of it is undone by revert."""
@@ -340,13 +363,13 @@ def apply_lightmap(obj, image, uv_name: str, shared: bool = False) -> None:
         original = slot.material
         if original is None:
             mat = bpy.data.materials.new(f"{obj.name} lightmap")
-            mat.use_nodes = True
+            _use_nodes(mat)
             record["slots"].append([index, None, mat.name, slot.link])
             slot.material = mat
-        elif shared or not original.use_nodes:
+        elif shared or not _has_nodes(original):
             mat = original.copy()
             mat.name = f"{original.name} ({obj.name} lightmap)"
-            mat.use_nodes = True
+            _use_nodes(mat)
             record["slots"].append([index, original.name, mat.name, slot.link])
             slot.material = mat
         else:
@@ -400,3 +423,74 @@ def apply_all(bl_scene, files: dict, uv_layer: Optional[str], estimator: str) ->
         shared = any(len(users.get(s.material.name, ())) > 1 for s in obj.material_slots if s.material)
         apply_lightmap(obj, image, uv_name, shared)
     return objs
+
+
+# --------------------------------------------------------------------------- Cycles reference
+
+def cycles_bake(bl_scene, object_names: Iterable[str], uv_name: str = DEFAULT_UV, resolution: int = 64,
+                samples: int = 256, bounces: Optional[int] = None, margin: int = 0,
+                seed: int = 0) -> dict:
+    """Cycles' own Diffuse bake (DIRECT+INDIRECT, no COLOR: E/π, our unit) of each object, as
+    (H, W, 3) float32 arrays with row 0 at the bottom. Render settings, selection, nodes and
+    images are restored afterwards; this is the reference every quality test compares against."""
+    cyc = bl_scene.cycles
+    saved = {k: getattr(cyc, k) for k in ("device", "samples", "use_adaptive_sampling", "use_denoising",
+                                          "sample_clamp_direct", "sample_clamp_indirect",
+                                          "diffuse_bounces", "seed")}
+    engine = bl_scene.render.engine
+    view_layer = bpy.context.view_layer
+    selected = [o for o in view_layer.objects if o.select_get()]
+    active = view_layer.objects.active
+    out = {}
+    try:
+        bl_scene.render.engine = "CYCLES"
+        cyc.device = "CPU"
+        cyc.samples = int(samples)
+        cyc.use_adaptive_sampling = False
+        cyc.use_denoising = False
+        cyc.sample_clamp_direct = 0.0
+        cyc.sample_clamp_indirect = 0.0
+        cyc.seed = int(seed)
+        if bounces is not None:
+            cyc.diffuse_bounces = int(bounces)
+        for name in object_names:
+            obj = bl_scene.objects[name]
+            img = bpy.data.images.new(f"detp_bake reference {name}", resolution, resolution,
+                                      alpha=False, float_buffer=True)
+            added = []
+            try:
+                for slot in obj.material_slots:
+                    mat = slot.material
+                    if mat is None or mat.node_tree is None:
+                        raise BakeError(f"object '{name}': Cycles bake needs node materials in every slot")
+                    node = mat.node_tree.nodes.new("ShaderNodeTexImage")
+                    node.image = img
+                    previous = mat.node_tree.nodes.active
+                    mat.node_tree.nodes.active = node
+                    added.append((mat, node, previous))
+                for o in view_layer.objects:
+                    o.select_set(False)
+                obj.select_set(True)
+                view_layer.objects.active = obj
+                res = bpy.ops.object.bake(type="DIFFUSE", pass_filter={"DIRECT", "INDIRECT"},
+                                          uv_layer=uv_name, margin=int(margin), margin_type="EXTEND",
+                                          use_clear=True, target="IMAGE_TEXTURES")
+                if "FINISHED" not in res:
+                    raise BakeError(f"object '{name}': Cycles bake did not finish")
+                px = np.empty(resolution * resolution * 4, np.float32)
+                img.pixels.foreach_get(px)
+                out[name] = px.reshape(resolution, resolution, 4)[..., :3].copy()
+            finally:
+                for mat, node, previous in added:
+                    mat.node_tree.nodes.remove(node)
+                    if previous is not None:
+                        mat.node_tree.nodes.active = previous
+                bpy.data.images.remove(img)
+    finally:
+        for k, v in saved.items():
+            setattr(cyc, k, v)
+        bl_scene.render.engine = engine
+        for o in view_layer.objects:
+            o.select_set(o in selected)
+        view_layer.objects.active = active
+    return out

@@ -42,6 +42,7 @@ def write_png(path: str | os.PathLike, image: np.ndarray) -> None:
 
 def _write(oiio, path, spec, data) -> None:
     path = str(path)
+    spec.attribute("DateTime", "")  # no timestamp: the same bake gives byte-identical files
     out = oiio.ImageOutput.create(path)
     if out is None or not out.open(path, spec):
         raise BakeError(f"cannot write image '{path}': {oiio.geterror()}")

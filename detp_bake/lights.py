@@ -44,6 +44,8 @@ def spot_attenuation(cos_angle: np.ndarray, spot_size: float, blend: float) -> n
 def _spot_solid_angle(spot_size: float, blend: float) -> float:
     """∫ attenuation dω over the cone, by quadrature in cos θ."""
     cos_half = np.cos(0.5 * spot_size)
+    if blend <= 0.0:
+        return float(2.0 * np.pi * (1.0 - cos_half))
     c = np.linspace(cos_half, 1.0, 4097)
     att = spot_attenuation(c, spot_size, blend)
     return float(2.0 * np.pi * np.trapezoid(att, c)) if hasattr(np, "trapezoid") else \
@@ -143,8 +145,9 @@ def area_emitter(light: AreaLight) -> Emitter:
 
 
 def mesh_emitter(scene: Scene, offset: float) -> Emitter | None:
-    """Emissive triangles: one-sided Lambertian from the front face, flux π·L·A each. Photons
-    start `offset` in front of the surface so they do not hit their own triangle."""
+    """Emissive triangles: Lambertian from BOTH faces, as Cycles emits (measured, DESIGN.md §3
+    calibration), so each triangle emits 2·π·L·A. Photons start `offset` off the surface so they
+    do not hit their own triangle."""
     lum = scene.emission.mean(axis=1)
     tri = np.flatnonzero(lum > 0.0)
     if tri.size == 0:
@@ -155,22 +158,24 @@ def mesh_emitter(scene: Scene, offset: float) -> Emitter | None:
     keep = area > 0.0
     tri, p, cross, area = tri[keep], p[keep], cross[keep], area[keep]
     normal = cross / (2.0 * area[:, None])
-    tri_flux = np.pi * scene.emission[tri].astype(np.float64) * area[:, None]
+    tri_flux = 2.0 * np.pi * scene.emission[tri].astype(np.float64) * area[:, None]
     flux = tri_flux.sum(axis=0)
     w = tri_flux.mean(axis=1)
     cdf = np.cumsum(w)
     cdf /= cdf[-1]
-    mean_w = w.sum()
+    total_w = w.sum()
 
     def sample(n, total, rng):
-        u = _uniform(n, rng, 5)
+        u = _uniform(n, rng, 6)
         k = np.minimum(np.searchsorted(cdf, u[0], side="right"), len(cdf) - 1)
         b0, b1, b2 = sampling.uniform_triangle(u[1], u[2])
+        side = np.where(u[5] < 0.5, 1.0, -1.0)[:, None]
+        nrm = normal[k] * side
         origins = b0[:, None] * p[k, 0] + b1[:, None] * p[k, 1] + b2[:, None] * p[k, 2]
-        origins += offset * normal[k]
-        dirs = sampling.cosine_hemisphere(normal[k], u[3], u[4])
-        # Pick ∝ mean flux, carry that triangle's RGB flux over its pick probability.
-        per = tri_flux[k] * (mean_w / w[k])[:, None] / total
+        origins += offset * nrm
+        dirs = sampling.cosine_hemisphere(nrm, u[3], u[4])
+        # Picked in proportion to mean flux: carry that triangle's RGB flux over its probability.
+        per = tri_flux[k] * (total_w / w[k])[:, None] / total
         return origins, dirs, per
 
     return Emitter("emissive meshes", flux, sample)

@@ -16,7 +16,8 @@ from .errors import BakeError
 
 @dataclass
 class PointLight:
-    """Isotropic: intensity power/(4π) W/sr. radius > 0 makes it a sphere light of the same power."""
+    """Isotropic: intensity power/(4π) W/sr. radius > 0 makes it a sphere light of the same power
+    (Cycles' point light with Soft Falloff off; with it on, Cycles is d²/(d²+r²) dimmer nearby)."""
     name: str
     position: np.ndarray
     power: np.ndarray  # RGB watts
@@ -78,7 +79,7 @@ class Scene:
 
     positions: (T, 3, 3) corner positions; normals: (T, 3, 3) corner shading normals;
     uvs: (T, 3, 2) lightmap UVs in [0, 1]; albedo: (T, 3) diffuse reflectance;
-    emission: (T, 3) emitted radiance W/(m² sr) (front face); world: constant sky radiance.
+    emission: (T, 3) emitted radiance W/(m² sr), from both faces as in Cycles; world: constant sky radiance.
     """
     positions: np.ndarray
     normals: np.ndarray

@@ -44,8 +44,7 @@ class TexelSet:
     normal: np.ndarray  # (N, 3) float64, unit shading normal
     triangle: np.ndarray  # (N,) int32
     pixel: np.ndarray  # (N,) int64, j * W + i within its lightmap
-    inside: np.ndarray  # (N,) bool: the centre lies inside its UV triangle
-    area: np.ndarray  # (N,) world area one texel covers on its triangle
+    area: np.ndarray  # (N,) world area of surface inside the texel's square (sums to the total)
     lightmaps: list[Lightmap]
 
     def __len__(self) -> int:
@@ -94,14 +93,58 @@ def _closest_on_triangle(px, py, ax, ay, bx, by, cx, cy):
 
 
 @numba.njit(cache=True)
-def _rasterise(uv, width, height, best_tri, best_d2, bary):
-    """For each texel, the UV triangle nearest its centre within half a texel diagonal."""
+def _clip_area(xs, ys, n, x0, y0, x1, y1):
+    """Area of the convex polygon (xs, ys)[:n] clipped to the box [x0, x1] × [y0, y1]."""
+    bx = np.empty(12)
+    by = np.empty(12)
+    for edge in range(4):
+        m = 0
+        for a in range(n):
+            b = (a + 1) % n
+            if edge == 0:
+                da, db = xs[a] - x0, xs[b] - x0
+            elif edge == 1:
+                da, db = x1 - xs[a], x1 - xs[b]
+            elif edge == 2:
+                da, db = ys[a] - y0, ys[b] - y0
+            else:
+                da, db = y1 - ys[a], y1 - ys[b]
+            if da >= 0.0:
+                bx[m] = xs[a]
+                by[m] = ys[a]
+                m += 1
+            if (da >= 0.0) != (db >= 0.0):
+                f = da / (da - db)
+                bx[m] = xs[a] + f * (xs[b] - xs[a])
+                by[m] = ys[a] + f * (ys[b] - ys[a])
+                m += 1
+        n = m
+        for a in range(n):
+            xs[a] = bx[a]
+            ys[a] = by[a]
+        if n < 3:
+            return 0.0
+    area = 0.0
+    for a in range(n):
+        b = (a + 1) % n
+        area += xs[a] * ys[b] - xs[b] * ys[a]
+    return 0.5 * abs(area)
+
+
+@numba.njit(cache=True)
+def _rasterise(uv, world_area, width, height, best_tri, best_d2, bary, cover):
+    """For each texel, the UV triangle nearest its centre within half a texel diagonal, and the
+    world area of surface inside the texel's square (`cover`), summed over triangles."""
+    xs = np.empty(12)
+    ys = np.empty(12)
     for t in range(uv.shape[0]):
         ax, ay = uv[t, 0, 0] * width, uv[t, 0, 1] * height
         bx, by = uv[t, 1, 0] * width, uv[t, 1, 1] * height
         cx, cy = uv[t, 2, 0] * width, uv[t, 2, 1] * height
-        if abs((bx - ax) * (cy - ay) - (by - ay) * (cx - ax)) <= 1e-12:
+        uv_area = 0.5 * abs((bx - ax) * (cy - ay) - (by - ay) * (cx - ax))
+        if uv_area <= 1e-12:
             continue
+        scale = world_area[t] / uv_area
         i0 = max(0, int(np.floor(min(ax, min(bx, cx)) - 1.5)))
         i1 = min(width - 1, int(np.ceil(max(ax, max(bx, cx)) + 0.5)))
         j0 = max(0, int(np.floor(min(ay, min(by, cy)) - 1.5)))
@@ -115,7 +158,12 @@ def _rasterise(uv, width, height, best_tri, best_d2, bary):
                 qy = w0 * ay + w1 * by + w2 * cy
                 d2 = (qx - px) ** 2 + (qy - py) ** 2
                 k = j * width + i
-                if d2 <= HALF_DIAGONAL_SQ and d2 < best_d2[k] - 1e-12:
+                if d2 > HALF_DIAGONAL_SQ:
+                    continue
+                xs[0], xs[1], xs[2] = ax, bx, cx
+                ys[0], ys[1], ys[2] = ay, by, cy
+                cover[k] += scale * _clip_area(xs, ys, 3, px - 0.5, py - 0.5, px + 0.5, py + 0.5)
+                if d2 < best_d2[k] - 1e-12:
                     best_d2[k] = d2
                     best_tri[k] = t
                     bary[k, 0], bary[k, 1], bary[k, 2] = w0, w1, w2
@@ -141,7 +189,8 @@ def rasterise(scene: Scene) -> TexelSet:
         best_tri = np.full(res * res, -1, np.int32)
         best_d2 = np.full(res * res, np.inf)
         bary = np.zeros((res * res, 3))
-        _rasterise(np.ascontiguousarray(uv[sl]), res, res, best_tri, best_d2, bary)
+        cover = np.zeros(res * res)
+        _rasterise(np.ascontiguousarray(uv[sl]), world_area[sl], res, res, best_tri, best_d2, bary, cover)
         pixel = np.flatnonzero(best_tri >= 0)
         if pixel.size == 0:
             raise BakeError(f"object '{obj.name}': its lightmap UVs cover no texel at {res}x{res} "
@@ -157,12 +206,10 @@ def rasterise(scene: Scene) -> TexelSet:
         bad = length < 1e-8
         nrm[bad] = face[bad]
         nrm /= np.maximum(np.linalg.norm(nrm, axis=1), 1e-30)[:, None]
-        tri_uv_texels = uv_area[tri] * res * res
-        area = world_area[tri] / np.maximum(tri_uv_texels, 1e-30)
         obj_uv = uv_area[sl].sum() * res * res
         texel_size = float(np.sqrt(world_area[sl].sum() / obj_uv)) if obj_uv > 0 else 0.0
         lightmaps.append(Lightmap(obj.name, index, res, res, offset, len(pixel), texel_size))
-        parts.append((pos, nrm, tri.astype(np.int32), pixel.astype(np.int64), best_d2[pixel] == 0.0, area))
+        parts.append((pos, nrm, tri.astype(np.int32), pixel.astype(np.int64), cover[pixel]))
         offset += len(pixel)
     if not parts:
         raise BakeError("no object to bake")

@@ -42,7 +42,8 @@ class PhotonMap(Estimator):
         if k < 2:
             counters.update(seconds_build=0.0, seconds_query=0.0)
             return Estimate(irradiance, counters)
-        tree = cKDTree(pos.astype(np.float64))
+        # An unbalanced, non-compact tree builds several times faster and queries about as fast.
+        tree = cKDTree(pos, balanced_tree=False, compact_nodes=False)
         t1 = time.perf_counter()
         cos_min = float(self.settings.normal_agreement)
         used = 0

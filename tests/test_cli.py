@@ -1,0 +1,101 @@
+"""The command line: a real bake in a subprocess, and bad input refused before any work."""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from conftest import CORNELL, ROOT
+from detp_bake.cli import main
+
+
+def _run_main(capsys, argv):
+    code = main(argv)
+    return code, capsys.readouterr().err
+
+
+def test_python_m_detp_bake_bakes_applies_and_saves(tmp_path, bpy):
+    out = tmp_path / "out"
+    saved = tmp_path / "baked.blend"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "-m", "detp_bake", "bake", str(CORNELL), "--objects", "Floor", "TallBox",
+                           "--photons", "100000", "--resolution", "32", "--out", str(out), "--format", "exr,png",
+                           "--apply", "--save", str(saved)], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "Tracing" in proc.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert [o["name"] for o in report["objects"]] == ["Floor", "TallBox"]
+    assert report["photons"] == 100_000 and report["segments"] >= report["hits"] > 0
+    assert set(report["seconds"]) >= {"export", "trace", "estimate", "write"}
+    assert report["settings"]["bounces"] == 4  # the scene's Cycles diffuse bounces
+    for name in ("Floor.photon_map.exr", "Floor.photon_map.png", "TallBox.photon_map.exr"):
+        assert (out / name).stat().st_size > 0
+    assert not list(out.glob(".*partial*"))
+    bpy.ops.wm.open_mainfile(filepath=str(saved))
+    mat = bpy.data.objects["Floor"].material_slots[0].material
+    assert "detp_bake lightmap" in mat.node_tree.nodes
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--resolution", "0"], "resolution"),
+    (["--photons", "5000000000"], "photons"),
+    (["--photons", "0"], "photons"),
+    (["--estimator", "nope"], "estimator"),
+    (["--k", "1"], "'k'"),
+    (["--format", "tiff"], "formats"),
+])
+def test_bad_settings_are_named(capsys, tmp_path, extra, message):
+    out = tmp_path / "out"
+    code, err = _run_main(capsys, ["bake", str(CORNELL), "--out", str(out), *extra])
+    assert code == 2 and message in err
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_unreadable_scene_path(capsys, tmp_path):
+    code, err = _run_main(capsys, ["bake", str(tmp_path / "missing.blend"), "--out", str(tmp_path / "o")])
+    assert code == 2 and "missing.blend" in err
+    assert not any((tmp_path / "o").iterdir())
+
+
+def test_unwritable_output_dir_is_refused_before_tracing(capsys, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    code, err = _run_main(capsys, ["bake", str(CORNELL), "--out", str(blocker / "out")])
+    assert code == 2 and "not writable" in err and str(blocker / "out") in err
+    assert "Tracing" not in err
+
+
+def test_missing_named_uv_layer_names_the_object(capsys, tmp_path):
+    code, err = _run_main(capsys, ["bake", str(CORNELL), "--uv-layer", "Baked", "--out", str(tmp_path)])
+    assert code == 2 and "has no UV layer 'Baked'" in err and "object '" in err
+    assert not any(tmp_path.iterdir())
+
+
+def test_unknown_object_is_named(capsys, tmp_path):
+    code, err = _run_main(capsys, ["bake", str(CORNELL), "--objects", "Teapot", "--out", str(tmp_path)])
+    assert code == 2 and "'Teapot'" in err
+
+
+def test_scene_without_lights(capsys, tmp_path, empty_blend, bpy):
+    from blender_helpers import plane_object
+    plane_object(bpy, "Lonely", 2.0, (0, 0, 0))
+    path = tmp_path / "dark.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    out = tmp_path / "out"
+    code, err = _run_main(capsys, ["bake", str(path), "--out", str(out)])
+    assert code == 2 and "no light" in err
+    assert "Tracing" not in err and not any(out.iterdir())
+
+
+def test_missing_default_uv_layer_is_created_and_said(capsys, tmp_path, empty_blend, bpy):
+    from blender_helpers import plane_object
+    plane_object(bpy, "Floor", 2.0, (0, 0, 0))
+    bpy.ops.object.light_add(type="SUN", location=(0, 0, 3))
+    path = tmp_path / "no_uv.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    code, err = _run_main(capsys, ["bake", str(path), "--photons", "20000", "--resolution", "16",
+                                   "--out", str(tmp_path / "out")])
+    assert code == 0, err
+    assert "created UV layer 'Lightmap'" in err and "Floor" in err
+    assert (tmp_path / "out" / "Floor.photon_map.exr").exists()

@@ -1,0 +1,72 @@
+"""Emission: total flux per light type in Cycles' units, and the photon share-out."""
+import numpy as np
+import pytest
+
+from detp_bake import lights
+from detp_bake.errors import BakeError
+from detp_bake.scene import AreaLight, PointLight, SpotLight, SunLight
+from synthetic import grid, make_scene
+
+
+def _drawn_flux(emitter, n=200_000, seed=1):
+    rng = np.random.default_rng(seed)
+    o, d, f = emitter.sample(n, n, rng)
+    assert np.allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-9)
+    return o, d, f
+
+
+def test_point_light_is_isotropic_and_emits_its_power():
+    e = lights.point_emitter(PointLight("P", np.zeros(3), np.array([10.0, 20.0, 30.0])))
+    o, d, f = _drawn_flux(e)
+    assert np.allclose(f.sum(axis=0), [10, 20, 30])
+    assert abs(d.mean(axis=0)).max() < 0.01  # no preferred direction
+
+
+def test_spot_light_keeps_point_intensity_inside_its_cone():
+    # Cycles: intensity P/(4π) inside the cone, so a 90° cone emits P·(1 − cos 45°)/2.
+    e = lights.spot_emitter(SpotLight("S", np.zeros(3), np.array([0, 0, -1.0]), np.full(3, 100.0),
+                                      np.radians(90), 0.0))
+    assert np.allclose(e.flux, 100 * (1 - np.cos(np.radians(45))) / 2, rtol=1e-4)
+    o, d, f = _drawn_flux(e)
+    assert np.allclose(f.sum(axis=0), e.flux, rtol=1e-9)
+    assert (d[:, 2] <= -np.cos(np.radians(45)) + 1e-9).all()
+
+
+def test_spot_blend_follows_cycles_smoothstep():
+    c = np.cos(np.radians([0, 20, 24, 27, 29]))
+    att = lights.spot_attenuation(c, np.radians(60), 0.5)
+    # Measured with Cycles (bpy 4.5 and 5.2): 1, 1, 0.79572, 0.31349, 0.04516.
+    assert np.allclose(att, [1, 1, 0.79572, 0.31349, 0.04516], atol=2e-4)
+
+
+def test_area_light_emits_exactly_its_power_one_sided():
+    m = np.eye(4)
+    m[:3, 3] = [0, 0, 2]
+    e = lights.area_emitter(AreaLight("A", m, "RECTANGLE", 1.0, 0.5, np.full(3, 60.0)))
+    o, d, f = _drawn_flux(e)
+    assert np.allclose(f.sum(axis=0), 60.0)
+    assert (d[:, 2] < 0).all()  # faces local −Z
+    assert np.abs(o[:, 0]).max() <= 0.5 and np.abs(o[:, 1]).max() <= 0.25
+    assert np.isclose(-d[:, 2].mean(), 2 / 3, atol=0.01)  # cosine-weighted: E[cos θ] = 2/3
+
+
+def test_sun_flux_covers_the_scene_disc():
+    sc = make_scene([("Plane", grid(2, 2, 2), 0.5, True)],
+                    [SunLight("Sun", np.array([0, 0, -1.0]), np.full(3, 3.0))])
+    centre, radius = sc.bounds()
+    e = lights.build_emitters(sc)[0]
+    assert np.allclose(e.flux, 3.0 * np.pi * radius ** 2)
+
+
+def test_no_light_is_a_clear_error():
+    sc = make_scene([("Plane", grid(2, 2, 2), 0.5, True)], [])
+    with pytest.raises(BakeError, match="no light"):
+        lights.build_emitters(sc)
+
+
+def test_allocation_is_proportional_and_complete():
+    class E:
+        def __init__(self, w):
+            self.weight = w
+    counts = lights.allocate([E(1.0), E(3.0), E(1e-9)], 1000)
+    assert counts.sum() >= 1000 and counts[1] == 750 and counts[2] == 1
