@@ -149,8 +149,11 @@ def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[P
             raise BakeCancelled()
         report(Progress("estimate", fraction, f"Estimating {100 * fraction:.0f} %"))
 
+    mean_albedo = float(np.clip(scene.albedo.mean(), 0.0, 0.999)) if scene.triangle_count else 0.0
+    expected_segments = int(tracer.photons * sum(mean_albedo ** b for b in range(min(bounces, 64) + 1)))
+    context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments)
     estimator = estimators.create(settings.estimator, texels, settings.estimator_settings,
-                                  estimate_progress)
+                                  estimate_progress, context)
     t_est = 0.0
     total = tracer.photons
     for batch in tracer.batches(cancelled):

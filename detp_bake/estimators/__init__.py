@@ -28,6 +28,13 @@ class EstimatorSettings:
 
 
 @dataclass
+class Context:
+    """What an estimator may need to know of the bake beyond the texels."""
+    scene_radius: float = 1.0
+    expected_segments: int = 0  # an estimate made before tracing, for work limits
+
+
+@dataclass
 class Estimate:
     irradiance: np.ndarray  # (N, 3) float64, W/m²
     counters: dict = field(default_factory=dict)
@@ -39,10 +46,11 @@ class Estimator:
     streaming = False  # True when `add` consumes a batch completely
 
     def __init__(self, texels: TexelSet, settings: EstimatorSettings,
-                 progress: Optional[Callable[[float], None]] = None):
+                 progress: Optional[Callable[[float], None]] = None, context: Optional[Context] = None):
         self.texels = texels
         self.settings = settings
         self.progress = progress or (lambda fraction: None)
+        self.context = context or Context()
 
     def add(self, batch: PhotonBatch) -> None:
         raise NotImplementedError
@@ -65,12 +73,12 @@ def names() -> list[str]:
 
 
 def create(name: str, texels: TexelSet, settings: EstimatorSettings,
-           progress: Optional[Callable[[float], None]] = None) -> Estimator:
+           progress: Optional[Callable[[float], None]] = None, context: Optional[Context] = None) -> Estimator:
     _load_all()
     if name not in REGISTRY:
         raise BakeError(f"unknown estimator '{name}' (choose one of: {', '.join(REGISTRY)})")
-    return REGISTRY[name](texels, settings, progress)
+    return REGISTRY[name](texels, settings, progress, context)
 
 
 def _load_all() -> None:
-    from . import photon_map  # noqa: F401  (registers itself)
+    from . import detp, disc_index, photon_map, sphere_cache  # noqa: F401  (they register themselves)

@@ -22,8 +22,8 @@ CHUNK = 8192  # texels per k-NN query, bounds the (chunk, k, 3) gather
 class PhotonMap(Estimator):
     name = "photon_map"
 
-    def __init__(self, texels, settings, progress=None):
-        super().__init__(texels, settings, progress)
+    def __init__(self, texels, settings, progress=None, context=None):
+        super().__init__(texels, settings, progress, context)
         self._parts = []
 
     def add(self, batch):
