@@ -30,7 +30,7 @@ MAX_BOUNCES = 1024
 
 @dataclass
 class BakeSettings:
-    estimator: str = "photon_map"
+    estimator: str = "disc_index"
     photons: int = 1_000_000
     bounces: Optional[int] = None  # None: the scene's own Cycles diffuse bounces
     seed: int = 0
@@ -90,6 +90,7 @@ class BakeResult:
     bounces: int
     images: dict  # object name -> (H, W, 3) float32 E/π, dilated, row 0 at the bottom
     masks: dict  # object name -> (H, W) bool, texels covered by the object's UVs
+    centre_masks: dict  # object name -> (H, W) bool, texels whose centre lies on a UV triangle
     texels: texels_mod.TexelSet
     value: np.ndarray  # (N, 3) E/π per texel, before dilation
     stats: TraceStats
@@ -170,12 +171,15 @@ def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[P
     seconds.update(trace=tracer.stats.seconds, estimate=t_est)
 
     value = est.irradiance / np.pi  # Cycles' Diffuse bake (DIRECT+INDIRECT, no COLOR) stores E/π
-    result_images, masks = {}, {}
+    result_images, masks, centre_masks = {}, {}, {}
     for lm in texels.lightmaps:
-        img, mask = texels_mod.to_image(value[lm.texels], lm, texels.pixel[lm.texels])
+        pixel = texels.pixel[lm.texels]
+        img, mask = texels_mod.to_image(value[lm.texels], lm, pixel)
         result_images[lm.name] = texels_mod.dilate(img, mask, settings.margin)
         masks[lm.name] = mask
-    return BakeResult(settings, bounces, result_images, masks, texels, value, tracer.stats,
+        centre_masks[lm.name] = np.zeros_like(mask)
+        centre_masks[lm.name].flat[pixel[texels.centre_inside[lm.texels]]] = True
+    return BakeResult(settings, bounces, result_images, masks, centre_masks, texels, value, tracer.stats,
                       est.counters, seconds)
 
 

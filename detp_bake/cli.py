@@ -27,7 +27,8 @@ def build_parser(prog: str = "python -m detp_bake", with_scene_path: bool = True
     if with_scene_path:
         b.add_argument("scene", help="the .blend file to bake")
     b.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake (default: all visible meshes)")
-    b.add_argument("--estimator", default="photon_map", help=f"one of: {', '.join(estimator_names())}")
+    b.add_argument("--estimator", default="disc_index",
+                   help=f"one of: {', '.join(estimator_names())} (default disc_index)")
     b.add_argument("--photons", type=int, default=1_000_000, help="photons to trace (default 1M)")
     b.add_argument("--k", type=int, default=100, help="photon map neighbours (default 100)")
     b.add_argument("--radius-texels", type=float, default=1.5, help="DETP disc radius in texels (default 1.5)")

@@ -45,6 +45,7 @@ class TexelSet:
     triangle: np.ndarray  # (N,) int32
     pixel: np.ndarray  # (N,) int64, j * W + i within its lightmap
     area: np.ndarray  # (N,) world area of surface inside the texel's square (sums to the total)
+    centre_inside: np.ndarray  # (N,) bool: the texel centre lies on a UV triangle (Cycles bakes only these)
     lightmaps: list[Lightmap]
 
     def __len__(self) -> int:
@@ -209,7 +210,8 @@ def rasterise(scene: Scene) -> TexelSet:
         obj_uv = uv_area[sl].sum() * res * res
         texel_size = float(np.sqrt(world_area[sl].sum() / obj_uv)) if obj_uv > 0 else 0.0
         lightmaps.append(Lightmap(obj.name, index, res, res, offset, len(pixel), texel_size))
-        parts.append((pos, nrm, tri.astype(np.int32), pixel.astype(np.int64), cover[pixel]))
+        parts.append((pos, nrm, tri.astype(np.int32), pixel.astype(np.int64), cover[pixel],
+                      best_d2[pixel] <= 1e-9))
         offset += len(pixel)
     if not parts:
         raise BakeError("no object to bake")

@@ -20,7 +20,8 @@ def test_python_m_detp_bake_bakes_applies_and_saves(tmp_path, bpy):
     saved = tmp_path / "baked.blend"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     proc = subprocess.run([sys.executable, "-m", "detp_bake", "bake", str(CORNELL), "--objects", "Floor", "TallBox",
-                           "--photons", "100000", "--resolution", "32", "--out", str(out), "--format", "exr,png",
+                           "--photons", "100000", "--resolution", "32", "--estimator", "photon_map",
+                           "--out", str(out), "--format", "exr,png",
                            "--apply", "--save", str(saved)], cwd=tmp_path, env=env, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     assert "Tracing" in proc.stderr
@@ -98,4 +99,4 @@ def test_missing_default_uv_layer_is_created_and_said(capsys, tmp_path, empty_bl
                                    "--out", str(tmp_path / "out")])
     assert code == 0, err
     assert "created UV layer 'Lightmap'" in err and "Floor" in err
-    assert (tmp_path / "out" / "Floor.photon_map.exr").exists()
+    assert (tmp_path / "out" / "Floor.disc_index.exr").exists()

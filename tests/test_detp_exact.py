@@ -46,7 +46,7 @@ def random_case(seed, n_discs=600, n_segments=6000):
     batch = PhotonBatch(n_segments, o.astype(np.float32), w.astype(np.float32), length.astype(np.float32),
                         flux.astype(np.float32), *(np.zeros((0, 3), np.float32),) * 4, np.zeros(0, np.int32))
     n = len(pos)
-    texels = TexelSet(pos, nrm, np.zeros(n, np.int32), np.arange(n), np.full(n, 1e-4),
+    texels = TexelSet(pos, nrm, np.zeros(n, np.int32), np.arange(n), np.full(n, 1e-4), np.ones(n, bool),
                       [Lightmap("discs", 0, n, 1, 0, n, 0.01)])
     return texels, batch
 

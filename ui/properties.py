@@ -3,12 +3,15 @@ import bpy
 from bpy.props import EnumProperty, IntProperty, PointerProperty, StringProperty
 
 ESTIMATORS = [
+    ("disc_index", "DETP: disc index", "Tangent-disc density estimation, discs indexed in a BVH (fastest)"),
+    ("sphere_cache", "DETP: sphere cache", "Tangent-disc density estimation through Lastra's sphere cache"),
+    ("detp", "DETP: brute force", "Every segment against every disc: slow, the reference"),
     ("photon_map", "Photon map", "Jensen's k-nearest-neighbour photon map"),
 ]
 
 
 class DETPBakeSettings(bpy.types.PropertyGroup):
-    estimator: EnumProperty(name="Estimator", items=ESTIMATORS, default="photon_map",
+    estimator: EnumProperty(name="Estimator", items=ESTIMATORS, default="disc_index",
                             description="Density estimator that turns photons into irradiance")
     photons: IntProperty(name="Photons", default=1_000_000, min=1, max=1_000_000_000,
                          description="Photons traced from the lights")
