@@ -103,3 +103,34 @@ def test_segments_ending_on_the_disc_plane_count_and_back_faces_do_not():
     r = 0.05
     e = run("detp", texels, [one], radius=r).irradiance[0, 0] * np.pi * r * r
     assert e == pytest.approx(2.0)  # the one ending on the plane and the one 1 cm short; not the back one
+
+
+def test_all_three_agree_on_a_real_bake_with_chart_borders():
+    """Texels from rasterised charts (border texels only partly covered, discs overhanging the
+    chart) and photons traced with bounces: the three DETP estimators give the same lightmap."""
+    from detp_bake.bake import BakeSettings, compute
+    from detp_bake.scene import PointLight
+    from synthetic import grid, make_scene, uv_sphere
+
+    plate = grid(2.0, 2.0, 3)
+    plate[2][:] = 0.1 + 0.35 * plate[2]  # the plate's chart covers a corner of its lightmap only
+    ball = uv_sphere(0.4, 8, 16)
+    ball = (ball[0] + [0.0, 0.0, 0.6], ball[1], ball[2])
+    sc = make_scene([("Plate", plate, 0.6, True), ("Ball", ball, 0.8, True)],
+                    [PointLight("Lamp", np.array([0.5, 0.3, 1.5]), np.full(3, 50.0))], resolution=24)
+    values = {name: compute(sc, BakeSettings(estimator=name, photons=30_000, bounces=2, seed=4,
+                                             estimator_settings=EstimatorSettings(radius_texels=1.5)))
+              for name in ("detp", "sphere_cache", "disc_index")}
+    ref = values["detp"]
+    assert ref.counters["crossings"] > 10_000
+    for name in ("sphere_cache", "disc_index"):
+        assert values[name].counters["crossings"] == ref.counters["crossings"]
+        assert np.allclose(values[name].value, ref.value, rtol=1e-6, atol=0)
+
+
+def test_brute_force_refuses_hours_of_work_before_tracing():
+    from detp_bake.errors import BakeError
+
+    texels, _ = random_case(0, n_discs=30, n_segments=10)
+    with pytest.raises(BakeError, match="sphere_cache or disc_index"):
+        create("detp", texels, EstimatorSettings(), context=Context(expected_segments=10 ** 10))
