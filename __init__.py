@@ -4,22 +4,36 @@ import os
 
 import bpy
 
-from . import operators, ui
 
-_modules = (ui.properties, operators, ui.panels)
+def _user_dir(*parts, create=False):
+    try:
+        return bpy.utils.extension_path_user(__package__, path=os.path.join(*parts) if parts else "", create=create)
+    except (ValueError, AttributeError):  # not installed as an extension (tests, legacy add-on)
+        return None
 
 
 def _numba_cache_dir() -> None:
-    """Compiled kernels are cached in the extension's user folder, never in the source tree."""
-    try:
-        path = bpy.utils.extension_path_user(__package__, path="numba_cache", create=True)
-    except (ValueError, AttributeError):
+    """Compiled kernels are cached in the extension's user folder (or the folder the preferences
+    name), never in the installed source tree. Numba reads this when the core is first imported."""
+    if "NUMBA_CACHE_DIR" in os.environ:
         return
-    os.environ.setdefault("NUMBA_CACHE_DIR", path)
+    base = _user_dir(create=True)
+    if base is None:
+        return
+    chosen = os.path.join(base, "cache_directory.txt")
+    path = open(chosen).read().strip() if os.path.isfile(chosen) else ""
+    os.environ["NUMBA_CACHE_DIR"] = path or _user_dir("numba_cache", create=True)
+
+
+_numba_cache_dir()
+
+from . import operators, ui  # noqa: E402  (after the cache folder is chosen)
+from .operators import cli_command  # noqa: E402
+
+_modules = (ui.properties, ui.preferences, operators, ui.panels, cli_command)
 
 
 def register():
-    _numba_cache_dir()
     for module in _modules:
         module.register()
 

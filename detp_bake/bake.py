@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -26,6 +26,7 @@ from .scene import Scene
 MAX_PHOTONS = 1_000_000_000
 MAX_RESOLUTION = 16384
 MAX_BOUNCES = 1024
+HIT_BYTES = 52  # one stored photon-map hit: position, direction, flux, normal (float32), triangle
 
 
 @dataclass
@@ -40,6 +41,7 @@ class BakeSettings:
     half: bool = False
     threads: int = 0  # 0: all cores
     batch_size: int = 100_000
+    memory_budget_mb: int = 0  # 0: no limit; the photon map keeps every hit (DETP streams)
     estimator_settings: EstimatorSettings = field(default_factory=EstimatorSettings)
 
     def validate(self) -> None:
@@ -63,6 +65,8 @@ class BakeSettings:
             bad("threads", self.threads, "must be 0 (all cores) or more")
         if self.batch_size < 1:
             bad("batch_size", self.batch_size, "must be positive")
+        if self.memory_budget_mb < 0:
+            bad("memory_budget_mb", self.memory_budget_mb, "must be 0 (no limit) or more")
         es = self.estimator_settings
         if es.k < 2:
             bad("k", es.k, "the photon map needs at least 2 neighbours")
@@ -131,7 +135,16 @@ def _cancel_fn(cancel) -> Callable[[], bool]:
 def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[Progress], None]] = None,
             cancel=None) -> BakeResult:
     """Trace, estimate and dilate; nothing touches the disk. Raises BakeError or BakeCancelled."""
-    settings.validate()
+    return compute_many(scene, settings, [settings.estimator], progress, cancel)[settings.estimator]
+
+
+def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional[Callable[[Progress], None]] = None,
+                 cancel=None) -> dict:
+    """Like `compute`, for several estimators fed the very same photons: every batch goes to each
+    of them as it is traced. Returns {estimator name: BakeResult}."""
+    names = list(dict.fromkeys(names))
+    for name in names:
+        replace(settings, estimator=name).validate()
     scene.check()
     report = progress or (lambda p: None)
     cancelled = _cancel_fn(cancel)
@@ -143,7 +156,7 @@ def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[P
                           settings.batch_size, settings.threads)
     t0 = time.perf_counter()
     texels = texels_mod.rasterise(scene)
-    seconds = {"rasterise": time.perf_counter() - t0}
+    rasterise_seconds = time.perf_counter() - t0
 
     def estimate_progress(fraction):
         if cancelled():
@@ -153,24 +166,38 @@ def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[P
     mean_albedo = float(np.clip(scene.albedo.mean(), 0.0, 0.999)) if scene.triangle_count else 0.0
     expected_segments = int(tracer.photons * sum(mean_albedo ** b for b in range(min(bounces, 64) + 1)))
     context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments)
-    estimator = estimators.create(settings.estimator, texels, settings.estimator_settings,
-                                  estimate_progress, context)
-    t_est = 0.0
+    stored_mb = expected_segments * HIT_BYTES / 1e6
+    if "photon_map" in names and settings.memory_budget_mb and stored_mb > settings.memory_budget_mb:
+        raise BakeError(f"the photon map would keep about {stored_mb:,.0f} MB of photon hits, over the memory "
+                        f"budget of {settings.memory_budget_mb:,} MB: use a DETP estimator (they stream "
+                        "photons) or fewer photons")
+    runs = {name: estimators.create(name, texels, settings.estimator_settings, estimate_progress, context)
+            for name in names}
+    spent = {name: 0.0 for name in names}
     total = tracer.photons
     for batch in tracer.batches(cancelled):
-        t1 = time.perf_counter()
-        estimator.add(batch)
-        t_est += time.perf_counter() - t1
+        for name, est in runs.items():
+            t1 = time.perf_counter()
+            est.add(batch)
+            spent[name] += time.perf_counter() - t1
         done = tracer.stats.photons
         report(Progress("trace", done / total, f"Tracing {_si(done)}/{_si(total)} photons"))
         if cancelled():
             raise BakeCancelled()
-    t1 = time.perf_counter()
-    est = estimator.finish()
-    t_est += time.perf_counter() - t1
-    seconds.update(trace=tracer.stats.seconds, estimate=t_est)
+    estimate_progress(0.0)
+    results = {}
+    for name, est in runs.items():
+        t1 = time.perf_counter()
+        out = est.finish()
+        spent[name] += time.perf_counter() - t1
+        seconds = {"rasterise": rasterise_seconds, "trace": tracer.stats.seconds, "estimate": spent[name]}
+        results[name] = _finish(replace(settings, estimator=name), bounces, texels, out, tracer, seconds)
+    return results
 
-    value = est.irradiance / np.pi  # Cycles' Diffuse bake (DIRECT+INDIRECT, no COLOR) stores E/π
+
+def _finish(settings, bounces, texels, est, tracer, seconds) -> BakeResult:
+    """E/π per texel (Cycles' Diffuse bake unit, DIRECT+INDIRECT, no COLOR), as dilated images."""
+    value = est.irradiance / np.pi
     result_images, masks, centre_masks = {}, {}, {}
     for lm in texels.lightmaps:
         pixel = texels.pixel[lm.texels]
@@ -189,9 +216,11 @@ def output_paths(result: BakeResult, out_dir: Path) -> dict:
 
 
 def write(result: BakeResult, out_dir: str | os.PathLike,
-          progress: Optional[Callable[[Progress], None]] = None) -> Path:
-    """Write every lightmap and report.json; files appear together or not at all."""
+          progress: Optional[Callable[[Progress], None]] = None, cancel=None) -> Path:
+    """Write every lightmap and report.json; files appear together or not at all (a cancel
+    before the last file is staged removes the staged ones)."""
     t0 = time.perf_counter()
+    cancelled = _cancel_fn(cancel)
     out = images.check_writable_dir(out_dir)
     report = progress or (lambda p: None)
     paths = output_paths(result, out)
@@ -207,6 +236,8 @@ def write(result: BakeResult, out_dir: str | os.PathLike,
                     images.WRITERS[fmt](tmp, result.images[name])
                 staged.append((tmp, target))
             report(Progress("write", (i + 1) / len(paths), f"Writing {name}"))
+            if cancelled():
+                raise BakeCancelled()
         for tmp, target in staged:
             os.replace(tmp, target)
     except BaseException:

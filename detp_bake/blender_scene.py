@@ -89,17 +89,17 @@ def material_albedo_emission(mat) -> tuple[np.ndarray, np.ndarray]:
     return np.array(mat.diffuse_color[:3], float), np.zeros(3)
 
 
-def ensure_lightmap_uv(obj, uv_name: str, margin: float = 1.0) -> bool:
-    """Create `uv_name` with Blender's Lightmap Pack when it is missing; keep the active UV layer.
-    Returns True when the layer was created."""
+def unwrap_into(obj, uv_name: str, unwrap: Callable[[], None]) -> None:
+    """Run a UV operator (`unwrap`, called in edit mode with all faces selected) into `uv_name`,
+    creating the layer if needed; the active UV layer, selection and mode are restored."""
     me = obj.data
-    if uv_name in me.uv_layers:
-        return False
     previous = me.uv_layers.active.name if me.uv_layers.active else None
     view_layer = bpy.context.view_layer
     selected = [o for o in view_layer.objects if o.select_get()]
     active = view_layer.objects.active
-    me.uv_layers.active = me.uv_layers.new(name=uv_name)
+    if uv_name not in me.uv_layers:
+        me.uv_layers.new(name=uv_name)
+    me.uv_layers.active = me.uv_layers[uv_name]
     try:
         for other in selected:
             other.select_set(False)
@@ -107,8 +107,7 @@ def ensure_lightmap_uv(obj, uv_name: str, margin: float = 1.0) -> bool:
         view_layer.objects.active = obj
         bpy.ops.object.mode_set(mode="EDIT")
         bpy.ops.mesh.select_all(action="SELECT")
-        bpy.ops.uv.lightmap_pack(PREF_CONTEXT="ALL_FACES", PREF_PACK_IN_ONE=True,
-                                 PREF_NEW_UVLAYER=False, PREF_MARGIN_DIV=margin)
+        unwrap()
         bpy.ops.object.mode_set(mode="OBJECT")
     finally:
         obj.select_set(False)
@@ -117,7 +116,24 @@ def ensure_lightmap_uv(obj, uv_name: str, margin: float = 1.0) -> bool:
         view_layer.objects.active = active
     if previous is not None and previous in me.uv_layers:
         me.uv_layers.active = me.uv_layers[previous]
+
+
+def ensure_lightmap_uv(obj, uv_name: str, margin: float = 1.0) -> bool:
+    """Create `uv_name` with Blender's Lightmap Pack when it is missing; keep the active UV layer.
+    Returns True when the layer was created."""
+    if uv_name in obj.data.uv_layers:
+        return False
+    unwrap_into(obj, uv_name, lambda: bpy.ops.uv.lightmap_pack(
+        PREF_CONTEXT="ALL_FACES", PREF_PACK_IN_ONE=True, PREF_NEW_UVLAYER=False, PREF_MARGIN_DIV=margin))
     return True
+
+
+def remove_uv_layers(bl_scene, created: Iterable) -> None:
+    """Undo `ensure_lightmap_uv` for (object name, layer) pairs, e.g. after a cancelled bake."""
+    for name, layer in created:
+        obj = bl_scene.objects.get(name)
+        if obj is not None and layer in obj.data.uv_layers:
+            obj.data.uv_layers.remove(obj.data.uv_layers[layer])
 
 
 def _mesh_arrays(obj, depsgraph, uv_name: Optional[str]):
@@ -210,11 +226,14 @@ def scene_bounces(bl_scene) -> int:
 
 
 def export_scene(bl_scene, depsgraph, objects: Optional[Iterable[str]] = None,
-                 uv_layer: Optional[str] = None, resolution: int = 0,
-                 log: Callable[[str], None] = print) -> Scene:
-    """Every visible mesh becomes geometry; `objects` (default: all of them) get lightmaps from
-    `uv_layer`. A named `uv_layer` must exist on every baked object; with none, DEFAULT_UV is used
-    and created by Lightmap Pack where it is missing (and said so through `log`)."""
+                 uv_layer=None, resolution=0, log: Callable[[str], None] = print,
+                 created: Optional[list] = None) -> Scene:
+    """Every visible mesh becomes geometry; `objects` (default: all of them) get lightmaps.
+
+    `uv_layer` names the lightmap UV layer: one name for all, or {object name: layer} for some; a
+    named layer must exist. Objects with no name given use DEFAULT_UV, created by Lightmap Pack
+    where missing (said through `log`, and listed in `created` as (object, layer) so a cancelled
+    bake can remove it again). `resolution` is one size for all or {object name: size}."""
     meshes = [o for o in bl_scene.objects if o.type == "MESH" and _is_visible(o)]
     if objects is None:
         targets = list(meshes)
@@ -231,21 +250,24 @@ def export_scene(bl_scene, depsgraph, objects: Optional[Iterable[str]] = None,
             targets.append(obj)
     if not targets:
         raise BakeError(f"scene '{bl_scene.name}' has no visible mesh object to bake")
-    uv_name = uv_layer or DEFAULT_UV
+    named = uv_layer if isinstance(uv_layer, dict) else {o.name: uv_layer for o in targets if uv_layer}
+    sizes = resolution if isinstance(resolution, dict) else {}
     for obj in targets:
-        if uv_name not in obj.data.uv_layers:
-            if uv_layer is not None:
-                raise BakeError(f"object '{obj.name}' has no UV layer '{uv_layer}'")
+        layer = named.get(obj.name)
+        if layer is not None and layer not in obj.data.uv_layers:
+            raise BakeError(f"object '{obj.name}' has no UV layer '{layer}'")
+    layers = {o.name: named.get(o.name) or DEFAULT_UV for o in targets}
     for obj in targets:
-        if ensure_lightmap_uv(obj, uv_name):
-            log(f"object '{obj.name}': created UV layer '{uv_name}' with Lightmap Pack")
+        if ensure_lightmap_uv(obj, layers[obj.name]):
+            log(f"object '{obj.name}': created UV layer '{layers[obj.name]}' with Lightmap Pack")
+            if created is not None:
+                created.append((obj.name, layers[obj.name]))
     depsgraph.update()
 
     pos, nrm, uvs, alb, emi, objs = [], [], [], [], [], []
     first = 0
-    target_set = set(o.name for o in targets)
     for obj in meshes:
-        p, n, u, mi = _mesh_arrays(obj, depsgraph, uv_name if obj.name in target_set else None)
+        p, n, u, mi = _mesh_arrays(obj, depsgraph, layers.get(obj.name))
         slots = [s.material for s in obj.material_slots] or [None]
         table = [material_albedo_emission(m) for m in slots]
         mi = np.clip(mi, 0, len(table) - 1)
@@ -254,10 +276,11 @@ def export_scene(bl_scene, depsgraph, objects: Optional[Iterable[str]] = None,
         pos.append(p)
         nrm.append(n)
         uvs.append(u)
-        bake = obj.name in target_set
+        bake = obj.name in layers
         if bake and len(p) == 0:
             raise BakeError(f"object '{obj.name}' has no faces to bake")
-        objs.append(BakeObject(obj.name, first, len(p), resolution, bake))
+        size = sizes.get(obj.name, 0) if isinstance(resolution, dict) else int(resolution or 0)
+        objs.append(BakeObject(obj.name, first, len(p), size, bake))
         first += len(p)
     lights = [l for l in (_light(o) for o in bl_scene.objects if o.type == "LIGHT" and _is_visible(o))
               if l is not None]
@@ -353,28 +376,39 @@ def _use_nodes(mat) -> None:
 
 def apply_lightmap(obj, image, uv_name: str, shared: bool = False) -> None:
     """Show `image` on `obj`'s materials. A material other baked objects also use is copied for
-    this object (`shared`), an empty slot gets a new material; all of it is undone by revert."""
-    revert(obj)
+    this object (`shared`), and so is every material of a mesh other objects share (the copy goes
+    in an object-level slot, so the other objects keep theirs); an empty slot gets a new material.
+    All of it is undone by `revert`."""
+    if REVERT_KEY in obj:
+        raise BakeError(f"object '{obj.name}' already shows a lightmap: revert it first")
     record = {"slots": [], "added_slots": 0, "image": image.name}
     if not obj.material_slots:
         obj.data.materials.append(None)
         record["added_slots"] = 1
+    shared_mesh = obj.data.users > 1
     for index, slot in enumerate(obj.material_slots):
+        entry = {"index": index, "original": slot.material.name if slot.material else None,
+                 "copy": None, "link": slot.link}
         original = slot.material
+        if shared_mesh and slot.link == "DATA":
+            slot.link = "OBJECT"
+            entry["object_material"] = slot.material.name if slot.material else None
         if original is None:
             mat = bpy.data.materials.new(f"{obj.name} lightmap")
             _use_nodes(mat)
-            record["slots"].append([index, None, mat.name, slot.link])
+            entry["copy"] = mat.name
             slot.material = mat
-        elif shared or not _has_nodes(original):
+        elif shared or shared_mesh or not _has_nodes(original):
             mat = original.copy()
             mat.name = f"{original.name} ({obj.name} lightmap)"
             _use_nodes(mat)
-            record["slots"].append([index, original.name, mat.name, slot.link])
+            if mat.node_tree.nodes.get(FRAME_NAME) is not None:
+                _unwire(mat)  # copied from a material that shows another lightmap
+            entry["copy"] = mat.name
             slot.material = mat
         else:
             mat = original
-            record["slots"].append([index, original.name, None, slot.link])
+        record["slots"].append(entry)
         if mat.node_tree.nodes.get(FRAME_NAME) is None:
             _wire(mat, image, uv_name)
     obj[REVERT_KEY] = json.dumps(record)
@@ -385,12 +419,17 @@ def revert(obj) -> bool:
     if REVERT_KEY not in obj:
         return False
     record = json.loads(obj[REVERT_KEY])
-    for index, original, copy, link in record["slots"]:
+    for entry in record["slots"]:
+        index, original, copy = entry["index"], entry["original"], entry["copy"]
         slot = obj.material_slots[index] if index < len(obj.material_slots) else None
         if copy is not None:
             made = bpy.data.materials.get(copy)
             if slot is not None:
-                slot.material = bpy.data.materials.get(original) if original else None
+                if "object_material" in entry:  # we switched this slot to object level
+                    slot.material = bpy.data.materials.get(entry["object_material"] or "")
+                    slot.link = entry["link"]
+                else:
+                    slot.material = bpy.data.materials.get(original) if original else None
             if made is not None and made.users == 0:
                 bpy.data.materials.remove(made)
         elif original is not None:
@@ -406,23 +445,33 @@ def revert(obj) -> bool:
     return True
 
 
-def apply_all(bl_scene, files: dict, uv_layer: Optional[str], estimator: str) -> list:
-    """Load each baked EXR and wire it into its object's materials; returns the objects."""
-    uv_name = uv_layer or DEFAULT_UV
-    objs = [bl_scene.objects[name] for name in files]
+def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional[dict] = None,
+              copy_materials: bool = False) -> list:
+    """Load each baked EXR and wire it into its object's materials; returns the objects.
+    `uv_layer`: one name, {object name: name}, or None for DEFAULT_UV. `objects` maps a lightmap's
+    object name to the object to apply it to (default: the scene's object of that name);
+    `copy_materials` gives each object its own material copies even when nobody shares them."""
+    targets = {}
+    for name in files:
+        obj = (objects or {}).get(name) or bl_scene.objects.get(name)
+        if obj is not None:
+            targets[name] = obj
     users: dict = {}
-    for obj in objs:
+    for obj in targets.values():
         for slot in obj.material_slots:
             if slot.material is not None:
                 users.setdefault(slot.material.name, set()).add(obj.name)
-    for obj in objs:
-        exr = [p for p in files[obj.name] if p.endswith(".exr")]
+    for name, obj in targets.items():
+        exr = [p for p in files[name] if p.endswith(".exr")]
         if not exr:
             raise BakeError("applying lightmaps needs the EXR format in 'formats'")
+        layer = uv_layer.get(name) if isinstance(uv_layer, dict) else uv_layer
+        revert(obj)  # a new bake replaces the last one
         image = load_image(exr[0], f"{obj.name}.{estimator}")
-        shared = any(len(users.get(s.material.name, ())) > 1 for s in obj.material_slots if s.material)
-        apply_lightmap(obj, image, uv_name, shared)
-    return objs
+        shared = copy_materials or any(len(users.get(s.material.name, ())) > 1
+                                       for s in obj.material_slots if s.material)
+        apply_lightmap(obj, image, layer or DEFAULT_UV, shared)
+    return list(targets.values())
 
 
 # --------------------------------------------------------------------------- Cycles reference

@@ -7,10 +7,12 @@ runs before tracing starts; progress goes to stderr, the report path to stdout.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
 from pathlib import Path
+from dataclasses import replace
 from typing import Optional, Sequence
 
 from . import __version__, bake as bake_mod, images
@@ -24,6 +26,16 @@ def build_parser(prog: str = "python -m detp_bake", with_scene_path: bool = True
     parser.add_argument("--version", action="version", version=f"detp_bake {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bake", help="bake lightmaps for a .blend file")
+    c = sub.add_parser("compare", help="bake the same photons with several estimators, side by side")
+    c.add_argument("--estimators", nargs="+", default=["photon_map", "sphere_cache", "disc_index"],
+                   help="estimators to compare; the first is the reference (default: photon_map sphere_cache "
+                        "disc_index)")
+    for p in (b, c):
+        _bake_arguments(p, with_scene_path)
+    return parser
+
+
+def _bake_arguments(b, with_scene_path):
     if with_scene_path:
         b.add_argument("scene", help="the .blend file to bake")
     b.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake (default: all visible meshes)")
@@ -48,7 +60,6 @@ def build_parser(prog: str = "python -m detp_bake", with_scene_path: bool = True
     b.add_argument("--half", action="store_true", help="write half-float EXR")
     b.add_argument("--apply", action="store_true", help="wire the lightmaps into the materials")
     b.add_argument("--save", default=None, metavar="OUT.blend", help="save the baked .blend here")
-    return parser
 
 
 def settings_from_args(args) -> bake_mod.BakeSettings:
@@ -75,9 +86,12 @@ class StderrProgress:
             print(f"detp_bake: {p.message}", file=sys.stderr, flush=True)
 
 
-def run_bake(args, bl_scene=None) -> int:
-    """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene)."""
-    settings = settings_from_args(args)
+def _log(msg: str) -> None:
+    print(f"detp_bake: {msg}", file=sys.stderr, flush=True)
+
+
+def _open_scene(args, settings, bl_scene):
+    """Check the inputs, open the .blend (unless Blender has one open) and export it."""
     settings.validate()
     if args.apply and "exr" not in settings.formats:
         raise BakeError("--apply needs the exr format in --format")
@@ -100,12 +114,43 @@ def run_bake(args, bl_scene=None) -> int:
             raise BakeError(f"cannot open scene file '{path}': {exc}") from None
         bl_scene = bpy.context.scene
     t0 = time.perf_counter()
-    log = lambda msg: print(f"detp_bake: {msg}", file=sys.stderr, flush=True)
     scene = blender_scene.export_scene(bl_scene, bpy.context.evaluated_depsgraph_get(), args.objects,
-                                       args.uv_layer, settings.resolution, log)
-    export_seconds = time.perf_counter() - t0
-    log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
-        f"baking {sum(o.bake for o in scene.objects)} objects with {settings.estimator}")
+                                       args.uv_layer, settings.resolution, _log)
+    _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
+         f"baking {sum(o.bake for o in scene.objects)} objects")
+    return bpy, blender_scene, bl_scene, scene, out_dir, time.perf_counter() - t0
+
+
+def run_compare(args, bl_scene=None) -> int:
+    """The same photons through several estimators: their lightmaps, compare.png, compare.json."""
+    settings = settings_from_args(args)
+    for name in args.estimators:
+        replace(settings, estimator=name).validate()
+    bpy, blender_scene, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
+    from . import comparison
+    results = bake_mod.compute_many(scene, settings, args.estimators, StderrProgress())
+    for result in results.values():
+        result.seconds["export"] = export_seconds
+        bake_mod.write(result, out_dir)
+    first = results[args.estimators[0]]
+    seconds = {n: r.seconds["estimate"] for n, r in results.items()}
+    picture, diffs = comparison.comparison_image({n: r.images for n, r in results.items()}, first.masks, seconds)
+    images.write_png(out_dir / "compare.png", picture)
+    summary = {"estimators": args.estimators, "seconds": seconds, "difference_to_first": diffs,
+               "trace_seconds": first.seconds["trace"], "photons": first.stats.photons,
+               "files": {n: r.files for n, r in results.items()}}
+    (out_dir / "compare.json").write_text(json.dumps(summary, indent=2))
+    for name in args.estimators:
+        _log(f"{name}: estimate {seconds[name]:.2f} s, difference to {args.estimators[0]} {100 * diffs[name]:.1f} %")
+    print(out_dir / "compare.png")
+    print(out_dir / "compare.json")
+    return 0
+
+
+def run_bake(args, bl_scene=None) -> int:
+    """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene)."""
+    settings = settings_from_args(args)
+    bpy, blender_scene, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
     result = bake_mod.bake(scene, settings, out_dir, StderrProgress(), export_seconds=export_seconds)
     if args.apply:
         blender_scene.apply_all(bl_scene, result.files, args.uv_layer, settings.estimator)
@@ -127,6 +172,8 @@ def main(argv: Optional[Sequence[str]] = None, bl_scene=None) -> int:
     try:
         if args.command == "bake":
             return run_bake(args, bl_scene)
+        if args.command == "compare":
+            return run_compare(args, bl_scene)
     except BakeError as exc:
         print(f"detp_bake: error: {exc}", file=sys.stderr)
         return 2

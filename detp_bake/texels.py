@@ -254,3 +254,18 @@ def dilate(image: np.ndarray, mask: np.ndarray, margin: int) -> np.ndarray:
         img[grow] = acc[grow] / cnt[grow][:, None]
         filled = filled | grow
     return img
+
+
+def resolution_for_density(positions: np.ndarray, uvs: np.ndarray, texels_per_metre: float,
+                           multiple: int = 4, limit: int = 8192) -> int:
+    """Lightmap size giving `texels_per_metre` on the surface, given how much of the UV square the
+    charts use: the side is √(world area / UV area) · density, rounded up to a multiple of 4."""
+    world = 0.5 * np.linalg.norm(np.cross(positions[:, 1] - positions[:, 0], positions[:, 2] - positions[:, 0]),
+                                 axis=1).sum()
+    uv = uvs.astype(np.float64)
+    uv_area = 0.5 * np.abs((uv[:, 1, 0] - uv[:, 0, 0]) * (uv[:, 2, 1] - uv[:, 0, 1])
+                           - (uv[:, 1, 1] - uv[:, 0, 1]) * (uv[:, 2, 0] - uv[:, 0, 0])).sum()
+    if world <= 0 or uv_area <= 0:
+        return multiple
+    side = np.sqrt(world / uv_area) * float(texels_per_metre)
+    return int(min(limit, max(multiple, multiple * np.ceil(side / multiple))))

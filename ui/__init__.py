@@ -1,2 +1,2 @@
-"""Properties and panels of the 3D View sidebar tab "Lightmap"."""
-from . import panels, properties  # noqa: F401
+"""Properties, preferences and panels of the 3D View sidebar tab "Lightmap"."""
+from . import panels, preferences, properties  # noqa: F401

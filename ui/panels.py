@@ -1,25 +1,135 @@
-"""The sidebar tab: settings and the Bake button; drawing only, no logic."""
+"""The 3D View sidebar tab "Lightmap": settings in collapsible sub-panels, the Bake button, the last
+bake's statistics and the lightmap tools. Drawing only; the operators do the work."""
+import json
+
 import bpy
 
 
-class DETPBAKE_PT_main(bpy.types.Panel):
-    bl_label = "detp_bake"
-    bl_idname = "DETPBAKE_PT_main"
+class _Panel:
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = "Lightmap"
 
+
+class DETPBAKE_PT_main(_Panel, bpy.types.Panel):
+    bl_label = "detp_bake"
+    bl_idname = "DETPBAKE_PT_main"
+
     def draw(self, context):
         layout = self.layout
-        settings = context.scene.detp_bake
+        s = context.scene.detp_bake
+        layout.prop(s, "estimator")
+        row = layout.row()
+        row.scale_y = 1.5
+        row.operator("detp_bake.bake", icon="RENDER_STILL")
+        row = layout.row(align=True)
+        row.operator("detp_bake.apply", icon="MATERIAL")
+        row.operator("detp_bake.revert", icon="LOOP_BACK")
+        layout.operator("detp_bake.open_image", icon="IMAGE_DATA")
+
+
+class DETPBAKE_PT_photons(_Panel, bpy.types.Panel):
+    bl_label = "Photons"
+    bl_parent_id = "DETPBAKE_PT_main"
+
+    def draw(self, context):
+        layout = self.layout
         layout.use_property_split = True
-        for prop in ("estimator", "photons", "bounces", "k", "resolution", "margin", "output_directory"):
-            layout.prop(settings, prop)
-        layout.operator("detp_bake.bake", icon="RENDER_STILL")
-        layout.operator("detp_bake.revert", icon="LOOP_BACK")
+        s = context.scene.detp_bake
+        layout.prop(s, "photons")
+        layout.prop(s, "bounces")
+        layout.prop(s, "seed")
+        layout.prop(s, "threads")
 
 
-classes = (DETPBAKE_PT_main,)
+class DETPBAKE_PT_estimator(_Panel, bpy.types.Panel):
+    bl_label = "Estimator"
+    bl_parent_id = "DETPBAKE_PT_main"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        s = context.scene.detp_bake
+        if s.estimator == "photon_map":
+            layout.prop(s, "k")
+            return
+        layout.prop(s, "radius_mode")
+        layout.prop(s, "radius_texels" if s.radius_mode == "TEXELS" else "radius")
+        if s.estimator == "sphere_cache":
+            layout.prop(s, "q")
+
+
+class DETPBAKE_PT_lightmaps(_Panel, bpy.types.Panel):
+    bl_label = "Lightmaps"
+    bl_parent_id = "DETPBAKE_PT_main"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        s = context.scene.detp_bake
+        layout.prop(s, "resolution_mode")
+        layout.prop(s, "resolution" if s.resolution_mode == "FIXED" else "texel_density")
+        layout.prop(s, "margin")
+        layout.prop(s, "output_directory")
+        layout.prop(s, "formats")
+        layout.prop(s, "apply_after_bake")
+        row = layout.row(align=True)
+        row.operator("detp_bake.unwrap", text="Unwrap: Lightmap Pack").method = "LIGHTMAP_PACK"
+        row.operator("detp_bake.unwrap", text="xatlas").method = "XATLAS"
+
+
+class DETPBAKE_PT_object(_Panel, bpy.types.Panel):
+    bl_label = "Active Object"
+    bl_parent_id = "DETPBAKE_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.active_object is not None and context.active_object.type == "MESH"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        o = context.active_object.detp_bake
+        layout.prop(o, "include")
+        layout.prop(o, "resolution")
+        layout.prop(o, "uv_layer")
+
+
+class DETPBAKE_PT_compare(_Panel, bpy.types.Panel):
+    bl_label = "Compare"
+    bl_parent_id = "DETPBAKE_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.prop(context.scene.detp_bake, "compare_estimators")
+        row = layout.row(align=True)
+        row.operator("detp_bake.compare", icon="SPLITSCREEN")
+        row.operator("detp_bake.compare_clear", icon="X")
+
+
+class DETPBAKE_PT_stats(_Panel, bpy.types.Panel):
+    bl_label = "Last Bake"
+    bl_parent_id = "DETPBAKE_PT_main"
+
+    def draw(self, context):
+        layout = self.layout
+        text = context.scene.detp_bake.last_report
+        if not text:
+            layout.label(text="No bake yet")
+            return
+        r = json.loads(text)
+        col = layout.column(align=True)
+        col.label(text=f"{r['estimator']}: {r['objects']} lightmaps")
+        col.label(text=f"{r['photons']:,} photons, {r['segments']:,} segments")
+        for phase in ("export", "trace", "estimate", "write"):
+            if phase in r["seconds"]:
+                col.label(text=f"{phase.capitalize()}: {r['seconds'][phase]:.2f} s")
+
+
+classes = (DETPBAKE_PT_main, DETPBAKE_PT_photons, DETPBAKE_PT_estimator, DETPBAKE_PT_lightmaps,
+           DETPBAKE_PT_object, DETPBAKE_PT_compare, DETPBAKE_PT_stats)
 
 
 def register():

@@ -1,42 +1,84 @@
-"""Bake settings stored on the scene (`scene.detp_bake`); names are part of the scripting API."""
+"""Bake settings stored on the scene (`scene.detp_bake`) and on objects (`object.detp_bake`).
+The property names are part of the scripting API: scripts and tests use them."""
 import bpy
-from bpy.props import EnumProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
+                       StringProperty)
 
 ESTIMATORS = [
-    ("disc_index", "DETP: disc index", "Tangent-disc density estimation, discs indexed in a BVH (fastest)"),
-    ("sphere_cache", "DETP: sphere cache", "Tangent-disc density estimation through Lastra's sphere cache"),
-    ("detp", "DETP: brute force", "Every segment against every disc: slow, the reference"),
-    ("photon_map", "Photon map", "Jensen's k-nearest-neighbour photon map"),
+    ("disc_index", "DETP: Disc Index", "Tangent-disc density estimation with the discs indexed in a BVH (fastest)"),
+    ("sphere_cache", "DETP: Sphere Cache", "Tangent-disc density estimation through Lastra's sphere cache"),
+    ("detp", "DETP: Brute Force", "Every segment against every disc: slow, the reference the others match"),
+    ("photon_map", "Photon Map", "Jensen's k-nearest-neighbour photon map: noisy, darkens edges"),
 ]
 
 
 class DETPBakeSettings(bpy.types.PropertyGroup):
     estimator: EnumProperty(name="Estimator", items=ESTIMATORS, default="disc_index",
                             description="Density estimator that turns photons into irradiance")
-    photons: IntProperty(name="Photons", default=1_000_000, min=1, max=1_000_000_000,
-                         description="Photons traced from the lights")
-    bounces: IntProperty(name="Bounces", default=-1, min=-1, max=1024,
-                         description="Diffuse bounces; -1 uses Cycles' Light Paths › Diffuse")
-    seed: IntProperty(name="Seed", default=0, min=0, description="Random seed of the photon tracer")
-    k: IntProperty(name="Neighbours", default=100, min=2, description="Photon map: photons per estimate")
-    resolution: IntProperty(name="Resolution", default=128, min=1, max=16384,
+    photons: IntProperty(name="Photons", default=1_000_000, min=1, max=1_000_000_000, soft_min=10_000,
+                         soft_max=50_000_000, description="Photons traced from the lights: more means less noise")
+    bounces: IntProperty(name="Bounces", default=-1, min=-1, max=1024, soft_max=16,
+                         description="Diffuse bounces before a photon lands (-1: Cycles' Light Paths > Diffuse)")
+    seed: IntProperty(name="Seed", default=0, min=0, description="Random seed: the same seed gives the same lightmaps")
+    radius_mode: EnumProperty(name="Disc Radius", default="TEXELS",
+                              items=[("TEXELS", "Texels", "Disc radius in texels of each object's lightmap"),
+                                     ("WORLD", "World", "Disc radius in scene units (metres)")],
+                              description="How the DETP disc radius is given")
+    radius_texels: FloatProperty(name="Radius", default=1.5, min=0.05, soft_max=8.0,
+                                 description="DETP disc radius in texels: larger is smoother but blurrier")
+    radius: FloatProperty(name="Radius", default=0.05, min=1e-5, subtype="DISTANCE", unit="LENGTH",
+                          description="DETP disc radius in scene units")
+    k: IntProperty(name="Neighbours", default=100, min=2, soft_max=5000,
+                   description="Photon map: hits per estimate; noise is about 1/sqrt(k)")
+    q: FloatProperty(name="Sphere Ratio", default=0.65, min=0.05, max=0.95,
+                     description="Sphere cache: radius ratio of successive spheres (best near 0.6-0.7)")
+    resolution_mode: EnumProperty(name="Size", default="FIXED",
+                                  items=[("FIXED", "Resolution", "The same lightmap size for every object"),
+                                         ("DENSITY", "Texel Density", "Lightmap size from each object's area")],
+                                  description="How lightmap sizes are chosen")
+    resolution: IntProperty(name="Resolution", default=128, min=1, max=16384, soft_min=16, soft_max=4096,
                             description="Lightmap width and height in pixels")
+    texel_density: FloatProperty(name="Texels per Metre", default=32.0, min=0.01, soft_max=1024.0,
+                                 description="Lightmap texels per metre of surface, when sizing by density")
     margin: IntProperty(name="Margin", default=16, min=0, max=4096,
-                        description="Pixels of dilation around the UV charts")
+                        description="Pixels of dilation around the UV charts, against seams under filtering")
     output_directory: StringProperty(name="Output", default="//lightmaps/", subtype="DIR_PATH",
-                                     description="Folder for the lightmap files")
+                                     description="Folder for the lightmap files (// is the .blend's folder)")
+    formats: EnumProperty(name="Formats", options={"ENUM_FLAG"}, default={"EXR"},
+                          items=[("EXR", "EXR", "32-bit float OpenEXR (the data)"),
+                                 ("PNG", "PNG", "8-bit sRGB preview")],
+                          description="Files written per object")
+    apply_after_bake: BoolProperty(name="Apply After Bake", default=True,
+                                   description="Show the lightmaps on the objects' materials when the bake ends")
+    threads: IntProperty(name="Threads", default=0, min=0, max=1024,
+                         description="Threads for tracing and estimation (0: the add-on preference, or all cores)")
+    compare_estimators: EnumProperty(name="Compare", options={"ENUM_FLAG"},
+                                     default={"photon_map", "sphere_cache", "disc_index"},
+                                     items=ESTIMATORS, description="Estimators shown side by side by Compare")
+    last_report: StringProperty(name="Last Bake", default="", options={"HIDDEN"},
+                                description="Statistics of the last bake (JSON)")
 
 
-classes = (DETPBakeSettings,)
+class DETPBakeObjectSettings(bpy.types.PropertyGroup):
+    include: BoolProperty(name="Include", default=True, description="Bake a lightmap for this object")
+    resolution: IntProperty(name="Resolution Override", default=0, min=0, max=16384,
+                            description="This object's lightmap size (0: use the scene setting)")
+    uv_layer: StringProperty(name="Lightmap UV", default="Lightmap",
+                             description="UV layer that holds this object's lightmap charts")
+
+
+classes = (DETPBakeSettings, DETPBakeObjectSettings)
 
 
 def register():
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.detp_bake = PointerProperty(type=DETPBakeSettings)
+    bpy.types.Object.detp_bake = PointerProperty(type=DETPBakeObjectSettings)
 
 
 def unregister():
+    del bpy.types.Object.detp_bake
     del bpy.types.Scene.detp_bake
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

@@ -21,6 +21,7 @@ from . import Estimate, Estimator, register
 from .discs import crossing_weight, make_discs
 
 STREAM_SEGMENTS = 2_000_000
+CHUNK_TEXELS = 4096
 
 
 def morton_order(points: np.ndarray) -> np.ndarray:
@@ -135,7 +136,10 @@ class SphereCache(Estimator):
         self.levels = np.maximum(0, np.floor(np.log(self.sphere_radius / r0) / np.log(q))).astype(np.int64)
         self.radii = r0 * q ** np.arange(int(self.levels.max()) + 1)
         self.visit = morton_order(self.discs.centre)
-        chunks = min(len(texels), 4 * numba.get_num_threads())
+        # Chunks of the Morton order, run `threads` at a time so progress and cancel are checked
+        # between groups; each chunk starts its cache afresh from level 0.
+        self.threads = numba.get_num_threads()
+        chunks = min(len(texels), max(4 * self.threads, -(-len(texels) // CHUNK_TEXELS)))
         self.edges = np.linspace(0, len(texels), chunks + 1).astype(np.int64)
         self.acc = np.zeros((len(texels), 3))
         self.stats = np.zeros((chunks, 4), np.int64)
@@ -159,8 +163,13 @@ class SphereCache(Estimator):
         o, w, length, flux = cat("seg_origin"), cat("seg_dir"), cat("seg_length"), cat("seg_flux")
         self.pending, self.pending_count = [], 0
         d = self.discs
-        _run(o, w, length, flux, d.eps, self.visit, self.edges, self.sphere_centre, self.sphere_radius,
-             self.levels, self.radii, d.centre, d.normal, d.radius, d.slab, d.kernel, self.acc, self.stats)
+        chunks = len(self.edges) - 1
+        for a in range(0, chunks, self.threads):
+            b = min(chunks, a + self.threads)
+            _run(o, w, length, flux, d.eps, self.visit, self.edges[a:b + 1], self.sphere_centre,
+                 self.sphere_radius, self.levels, self.radii, d.centre, d.normal, d.radius, d.slab, d.kernel,
+                 self.acc, self.stats[a:b])
+            self.progress(b / chunks)
         self.segments += len(length)
         self.seconds_query += time.perf_counter() - t0
 

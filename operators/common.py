@@ -1,0 +1,57 @@
+"""What every operator needs: the bake settings from the scene's properties, the objects to bake,
+and a Blender scene exported for the core."""
+import bpy
+
+from ..detp_bake import blender_scene, texels
+from ..detp_bake.bake import BakeSettings
+from ..detp_bake.estimators import EstimatorSettings
+
+
+def preferences(context):
+    addon = context.preferences.addons.get(__package__.rpartition(".")[0])
+    return addon.preferences if addon is not None else None
+
+
+def bake_settings(context, estimator=None) -> BakeSettings:
+    s = context.scene.detp_bake
+    prefs = preferences(context)
+    threads = s.threads or (prefs.threads if prefs is not None else 0)
+    return BakeSettings(
+        estimator=estimator or s.estimator, photons=s.photons, bounces=None if s.bounces < 0 else s.bounces,
+        seed=s.seed, resolution=s.resolution, margin=s.margin,
+        formats=tuple(f.lower() for f in sorted(s.formats)) or ("exr",), threads=threads,
+        memory_budget_mb=prefs.memory_budget if prefs is not None else 0,
+        estimator_settings=EstimatorSettings(
+            k=s.k, q=s.q, radius_texels=s.radius_texels,
+            radius=s.radius if s.radius_mode == "WORLD" else None))
+
+
+def output_directory(context) -> str:
+    return bpy.path.abspath(context.scene.detp_bake.output_directory)
+
+
+def bake_targets(context) -> list:
+    """Selected meshes marked Include, or every visible included mesh when none is selected."""
+    def ok(o):
+        return o.type == "MESH" and o.visible_get() and not o.hide_render and o.detp_bake.include
+    picked = [o for o in context.selected_objects if ok(o)]
+    return picked or [o for o in context.scene.objects if ok(o)]
+
+
+def uv_layers(objects) -> dict:
+    """Per-object UV layer names that the user set explicitly (the default may be created)."""
+    return {o.name: o.detp_bake.uv_layer for o in objects if o.detp_bake.uv_layer != blender_scene.DEFAULT_UV}
+
+
+def export(context, objects, log, created=None):
+    """The scene for the core, with each object's lightmap size (override, density or fixed)."""
+    s = context.scene.detp_bake
+    sizes = {o.name: o.detp_bake.resolution or s.resolution for o in objects}
+    scene = blender_scene.export_scene(context.scene, context.evaluated_depsgraph_get(), [o.name for o in objects],
+                                       uv_layers(objects), sizes, log, created)
+    if s.resolution_mode == "DENSITY":
+        for obj in scene.objects:
+            if obj.bake and not context.scene.objects[obj.name].detp_bake.resolution:
+                sl = obj.triangles
+                obj.resolution = texels.resolution_for_density(scene.positions[sl], scene.uvs[sl], s.texel_density)
+    return scene

@@ -1,0 +1,168 @@
+"""Operators on lightmaps that exist: apply, revert, open in an Image Editor, and unwrap (create
+the lightmap UV layer) before a bake."""
+import json
+import os
+
+import bpy
+import numpy as np
+from bpy.props import EnumProperty
+
+from ..detp_bake import blender_scene, images
+from ..detp_bake.errors import BakeError
+from . import common
+
+
+def _files_for(context, objects, estimator):
+    out = common.output_directory(context)
+    found = {}
+    for obj in objects:
+        path = os.path.join(out, f"{images.file_stem(obj.name)}.{estimator}.exr")
+        if os.path.isfile(path):
+            found[obj.name] = [path]
+    return found
+
+
+class DETPBAKE_OT_apply(bpy.types.Operator):
+    """Show the baked lightmaps (from the output folder) on the selected objects' materials"""
+    bl_idname = "detp_bake.apply"
+    bl_label = "Apply Lightmaps"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        objects = common.bake_targets(context)
+        estimator = context.scene.detp_bake.estimator
+        files = _files_for(context, objects, estimator)
+        if not files:
+            self.report({"ERROR"}, f"no {estimator} lightmaps in {common.output_directory(context)}: bake first")
+            return {"CANCELLED"}
+        try:
+            blender_scene.apply_all(context.scene, files, common.uv_layers(objects), estimator)
+        except BakeError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        missing = len(objects) - len(files)
+        self.report({"INFO"}, f"Applied {len(files)} lightmaps" + (f"; {missing} objects have none" if missing else ""))
+        return {"FINISHED"}
+
+
+class DETPBAKE_OT_revert(bpy.types.Operator):
+    """Remove the baked lightmaps from the selected objects' materials, restoring them exactly"""
+    bl_idname = "detp_bake.revert"
+    bl_label = "Revert Lightmaps"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        objs = context.selected_objects or list(context.scene.objects)
+        n = sum(blender_scene.revert(o) for o in objs)
+        self.report({"INFO"}, f"Reverted {n} objects" if n else "Nothing to revert")
+        return {"FINISHED"}
+
+
+class DETPBAKE_OT_open_image(bpy.types.Operator):
+    """Open the active object's lightmap in an Image Editor"""
+    bl_idname = "detp_bake.open_image"
+    bl_label = "Open in Image Editor"
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return obj is not None and blender_scene.REVERT_KEY in obj
+
+    def execute(self, context):
+        obj = context.active_object
+        image = bpy.data.images.get(json.loads(obj[blender_scene.REVERT_KEY]).get("image", ""))
+        if image is None:
+            self.report({"ERROR"}, f"object '{obj.name}' has no lightmap image")
+            return {"CANCELLED"}
+        for window in context.window_manager.windows:
+            for area in window.screen.areas:
+                if area.type == "IMAGE_EDITOR":
+                    area.spaces.active.image = image
+                    return {"FINISHED"}
+        if bpy.app.background or context.window is None:
+            self.report({"INFO"}, f"lightmap image: {image.name} ({image.filepath})")
+            return {"FINISHED"}
+        bpy.ops.wm.window_new()
+        area = context.window_manager.windows[-1].screen.areas[0]
+        area.type = "IMAGE_EDITOR"
+        area.spaces.active.image = image
+        return {"FINISHED"}
+
+
+def _xatlas_unwrap(obj, layer, resolution):
+    """Charts from Smart UV Project (whole polygons, so every face keeps consistent UVs), packed
+    by xatlas at the lightmap's resolution with a 2-texel bilinear padding; only `layer` changes.
+    Returns xatlas' utilisation of the lightmap."""
+    import xatlas
+
+    blender_scene.unwrap_into(obj, layer, lambda: bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0))
+    me = obj.data
+    me.calc_loop_triangles()
+    tri_l = np.empty(len(me.loop_triangles) * 3, np.int64)
+    me.loop_triangles.foreach_get("loops", tri_l)
+    loop_v = np.empty(len(me.loops), np.int64)
+    me.loops.foreach_get("vertex_index", loop_v)
+    co = np.empty(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3) * np.abs(np.array(obj.matrix_world.to_scale(), np.float32))
+    uv = np.empty(len(me.loops) * 2, np.float32)
+    me.uv_layers[layer].uv.foreach_get("vector", uv)
+    uv = uv.reshape(-1, 2)
+    # One xatlas vertex per (mesh vertex, UV) pair: islands stay connected, seams stay seams.
+    keys, vertex_of_loop = np.unique(np.c_[loop_v, np.round(uv * 1e6)], axis=0, return_inverse=True)
+    vertex_of_loop = vertex_of_loop.reshape(-1)
+    first = np.zeros(len(keys), np.int64)
+    first[vertex_of_loop] = np.arange(len(vertex_of_loop))
+    atlas = xatlas.Atlas()
+    atlas.add_mesh(np.ascontiguousarray(co[loop_v[first]]), vertex_of_loop[tri_l].reshape(-1, 3).astype(np.uint32),
+                   None, np.ascontiguousarray(uv[first]))
+    charts = xatlas.ChartOptions()
+    charts.use_input_mesh_uvs = True
+    pack = xatlas.PackOptions()
+    pack.resolution = int(resolution)
+    pack.padding = 2
+    pack.bilinear = True
+    atlas.generate(charts, pack)
+    _, indices, packed = atlas[0]
+    out = np.zeros_like(uv)
+    out[tri_l] = packed[indices.reshape(-1)]
+    me.uv_layers[layer].uv.foreach_set("vector", out.reshape(-1))
+    return float(np.ravel(atlas.utilization)[0])
+
+
+class DETPBAKE_OT_unwrap(bpy.types.Operator):
+    """Create (or redo) the lightmap UV layer of the selected meshes, leaving other UV layers alone"""
+    bl_idname = "detp_bake.unwrap"
+    bl_label = "Unwrap Lightmap UVs"
+    bl_options = {"REGISTER", "UNDO"}
+
+    method: EnumProperty(name="Method", default="LIGHTMAP_PACK", items=[
+        ("LIGHTMAP_PACK", "Lightmap Pack", "Blender's Lightmap Pack: fast, one chart per face"),
+        ("XATLAS", "xatlas", "xatlas charts: fewer seams, tighter packing, slower")])
+
+    def execute(self, context):
+        objects = [o for o in common.bake_targets(context) if o.type == "MESH"]
+        if not objects:
+            self.report({"ERROR"}, "select mesh objects to unwrap")
+            return {"CANCELLED"}
+        if context.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+        s = context.scene.detp_bake
+        for obj in objects:
+            layer = obj.detp_bake.uv_layer
+            res = obj.detp_bake.resolution or s.resolution
+            existed = layer in obj.data.uv_layers
+            if self.method == "XATLAS":
+                used = _xatlas_unwrap(obj, layer, res)
+                self.report({"INFO"}, f"'{obj.name}': xatlas charts use {100 * used:.0f} % of the lightmap")
+            else:
+                if existed:
+                    obj.data.uv_layers.remove(obj.data.uv_layers[layer])
+                # Lightmap Pack leaves 2 / int(100 / margin) of UV space between charts: about 3 texels.
+                blender_scene.ensure_lightmap_uv(obj, layer, margin=float(np.clip(150.0 / res, 0.001, 1.0)))
+        self.report({"INFO"}, f"Unwrapped {len(objects)} objects into '{objects[0].detp_bake.uv_layer}' "
+                              f"with {'xatlas' if self.method == 'XATLAS' else 'Lightmap Pack'}")
+        return {"FINISHED"}
+
+
+classes = (DETPBAKE_OT_apply, DETPBAKE_OT_revert, DETPBAKE_OT_open_image, DETPBAKE_OT_unwrap)

@@ -1,0 +1,261 @@
+"""The extension inside Blender (bpy wheel, background mode): registration, panels, the bake job
+with its worker and cancel, apply/revert, compare, unwrap and the `blender -c` command."""
+import importlib.util
+import json
+import sys
+
+import numpy as np
+import pytest
+
+from blender_helpers import plane_object, scene_snapshot
+from conftest import CORNELL, ROOT
+
+PACKAGE = "detp_bake_addon"
+
+
+def _import_addon():
+    if PACKAGE in sys.modules:
+        return sys.modules[PACKAGE]
+    spec = importlib.util.spec_from_file_location(PACKAGE, ROOT / "__init__.py", submodule_search_locations=[str(ROOT)])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[PACKAGE] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture
+def addon(bpy):
+    module = _import_addon()
+    module.register()
+    yield module
+    module.unregister()
+
+
+def _registered(bpy):
+    names = set()
+    for base in (bpy.types.Panel, bpy.types.Operator, bpy.types.PropertyGroup, bpy.types.AddonPreferences):
+        names |= {c.__name__ for c in base.__subclasses__() if c.__module__.startswith(PACKAGE)
+                  and getattr(c, "is_registered", False)}
+    return names
+
+
+def test_register_and_unregister_leave_nothing_behind(bpy):
+    module = _import_addon()
+    module.register()
+    assert hasattr(bpy.types.Scene, "detp_bake") and hasattr(bpy.types.Object, "detp_bake")
+    assert hasattr(bpy.ops.detp_bake, "bake") and bpy.ops.detp_bake.bake.get_rna_type()
+    assert len(_registered(bpy)) >= 10
+    module.unregister()
+    assert not hasattr(bpy.types.Scene, "detp_bake") and not hasattr(bpy.types.Object, "detp_bake")
+    assert _registered(bpy) == set()
+    module.register()  # and again, as Blender does on reload
+    module.unregister()
+
+
+class RecordingLayout:
+    """Stands in for UILayout: records what a panel draws and checks every path exists."""
+
+    def __init__(self, bpy, log):
+        self.bpy, self.log = bpy, log
+        self.use_property_split = False
+        self.scale_y = 1.0
+
+    def _child(self, *args, **kwargs):
+        return RecordingLayout(self.bpy, self.log)
+
+    row = column = box = split = _child
+
+    def label(self, text="", **kwargs):
+        self.log.append(("label", text))
+
+    def prop(self, data, path, **kwargs):
+        assert path in data.bl_rna.properties, f"{data} has no property {path!r}"
+        self.log.append(("prop", path))
+
+    def operator(self, idname, **kwargs):
+        category, name = idname.split(".")
+        assert hasattr(getattr(self.bpy.ops, category), name), f"no operator {idname}"
+        self.log.append(("operator", idname))
+
+        class Props:
+            pass
+        return Props()
+
+
+def test_every_panel_draws_existing_properties_and_operators(addon, cornell, bpy):
+    from detp_bake_addon.ui import panels
+    bpy.context.view_layer.objects.active = cornell.objects["Floor"]
+    s = cornell.detp_bake
+    seen = set()
+    for estimator in ("disc_index", "sphere_cache", "photon_map"):
+        for mode in ("FIXED", "DENSITY"):
+            s.estimator, s.resolution_mode, s.radius_mode = estimator, mode, "WORLD" if mode == "DENSITY" else "TEXELS"
+            s.last_report = "" if estimator == "disc_index" else json.dumps(
+                {"estimator": estimator, "objects": 7, "photons": 10, "segments": 20,
+                 "seconds": {"export": 0.1, "trace": 1.0, "estimate": 0.5, "write": 0.1}})
+            for cls in panels.classes:
+                if hasattr(cls, "poll") and not cls.poll(bpy.context):
+                    continue
+                log = []
+                cls.draw(type("P", (), {"layout": RecordingLayout(bpy, log)})(), bpy.context)
+                seen |= {entry[1] for entry in log}
+    assert {"detp_bake.bake", "detp_bake.apply", "detp_bake.revert", "detp_bake.unwrap", "detp_bake.compare",
+            "detp_bake.compare_clear", "detp_bake.open_image", "photons", "radius_texels", "radius", "k", "q",
+            "texel_density", "uv_layer", "include"} <= seen
+
+
+def _small(scene, out, **extra):
+    s = scene.detp_bake
+    s.photons, s.resolution, s.output_directory = 20_000, 16, str(out)
+    for key, value in extra.items():
+        setattr(s, key, value)
+
+
+def test_bake_operator_bakes_applies_and_reports(addon, cornell, bpy, tmp_path):
+    _small(cornell, tmp_path)
+    assert bpy.ops.detp_bake.bake() == {"FINISHED"}
+    assert (tmp_path / "Floor.disc_index.exr").exists() and (tmp_path / "report.json").exists()
+    mat = cornell.objects["Floor"].material_slots[0].material
+    assert "detp_bake lightmap" in mat.node_tree.nodes
+    report = json.loads(cornell.detp_bake.last_report)
+    assert report["estimator"] == "disc_index" and report["photons"] == 20_000 and report["objects"] == 7
+    assert mat.name.startswith("White (Floor")  # White is shared: Floor got its own copy
+    assert bpy.ops.detp_bake.revert() == {"FINISHED"}
+    mat = cornell.objects["Floor"].material_slots[0].material
+    assert mat.name == "White" and "detp_bake lightmap" not in mat.node_tree.nodes
+    assert bpy.ops.detp_bake.apply() == {"FINISHED"}  # from the files on disk
+    assert "detp_bake lightmap" in cornell.objects["Floor"].material_slots[0].material.node_tree.nodes
+
+
+def test_bake_operator_refuses_bad_settings_before_work(addon, cornell, bpy, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    _small(cornell, blocker / "out")
+    before = scene_snapshot(bpy)
+    with pytest.raises(RuntimeError, match="not writable"):
+        bpy.ops.detp_bake.bake()
+    assert scene_snapshot(bpy) == before
+
+
+@pytest.mark.parametrize("phase", ["export", "trace", "estimate", "write"])
+def test_cancel_at_each_phase_leaves_the_scene_unchanged(addon, empty_blend, bpy, tmp_path, phase):
+    """The worker thread path of the modal operator, cancelled in each phase. The scene has no
+    Lightmap UV layer, so the export creates one that a cancel must remove again."""
+    from detp_bake_addon.operators.bake import BakeJob
+    plane_object(bpy, "Floor", 2.0, (0, 0, 0))
+    bpy.ops.object.light_add(type="SUN", location=(0, 0, 3))
+    bpy.ops.object.select_all(action="DESELECT")
+    _small(empty_blend, tmp_path / "out", estimator="sphere_cache")
+    before = scene_snapshot(bpy)
+    job = BakeJob(bpy.context)
+    job.prepare(bpy.context)
+    assert job.created_uv == [("Floor", "Lightmap")]
+    if phase == "export":
+        job.cancel.set()
+    else:
+        hook = job._on_progress
+
+        def cancel_in_phase(p):
+            hook(p)
+            if p.phase == phase:
+                job.cancel.set()
+        job._on_progress = cancel_in_phase
+    job.start()
+    job.thread.join(timeout=60)
+    assert job.done and job.cancelled
+    reports = []
+    assert job.finish(bpy.context, lambda kind, msg: reports.append(msg)) == {"CANCELLED"}
+    assert any("cancelled" in m for m in reports)
+    assert scene_snapshot(bpy) == before
+    assert not [p for p in (tmp_path / "out").iterdir() if p.suffix in (".exr", ".json")]
+
+
+def test_compare_and_clear_round_trip(addon, cornell, bpy, tmp_path):
+    _small(cornell, tmp_path)
+    before = scene_snapshot(bpy)
+    n_objects = len(bpy.data.objects)
+    assert bpy.ops.detp_bake.compare(estimators={"photon_map", "disc_index"}) == {"FINISHED"}
+    coll = bpy.data.collections["detp_bake compare"]
+    dups = [o for o in coll.objects if o.type == "MESH"]
+    labels = [o for o in coll.objects if o.type == "FONT"]
+    assert len(dups) == 2 * 7 and len(labels) == 2
+    assert all(d.data == cornell.objects[d.name.split(" [")[0]].data for d in dups)  # linked duplicates
+    assert "disc_index" in labels[0].data.body + labels[1].data.body
+    assert (tmp_path / "compare.png").exists() and (tmp_path / "Floor.photon_map.exr").exists()
+    floor_pm = next(d for d in dups if d.name == "Floor [photon_map]")
+    mat = floor_pm.material_slots[0].material
+    assert mat != cornell.objects["Floor"].material_slots[0].material  # its own material variant
+    assert bpy.ops.detp_bake.compare_clear() == {"FINISHED"}
+    assert "detp_bake compare" not in bpy.data.collections and len(bpy.data.objects) == n_objects
+    assert scene_snapshot(bpy) == before
+
+
+def test_unwrap_creates_only_the_lightmap_layer(addon, empty_blend, bpy):
+    bpy.ops.mesh.primitive_monkey_add()
+    obj = bpy.context.active_object
+    texture_uv = np.empty(len(obj.data.loops) * 2)
+    obj.data.uv_layers["UVMap"].uv.foreach_get("vector", texture_uv)
+    for method in ("LIGHTMAP_PACK", "XATLAS"):
+        assert bpy.ops.detp_bake.unwrap(method=method) == {"FINISHED"}
+        assert [l.name for l in obj.data.uv_layers] == ["UVMap", "Lightmap"]
+        assert obj.data.uv_layers.active.name == "UVMap"
+        after = np.empty_like(texture_uv)
+        obj.data.uv_layers["UVMap"].uv.foreach_get("vector", after)
+        assert np.array_equal(after, texture_uv)
+        uv = np.empty(len(obj.data.loops) * 2)
+        obj.data.uv_layers["Lightmap"].uv.foreach_get("vector", uv)
+        assert uv.min() >= 0.0 and uv.max() <= 1.0 and np.ptp(uv) > 0.5
+
+
+def _centre_hits(uvs, res):
+    """How many UV triangles strictly contain each texel centre (shared edges do not count)."""
+    counts = np.zeros((res, res), int)
+    centres = (np.arange(res) + 0.5) / res
+    for tri in uvs:
+        (ax, ay), (bx, by), (cx, cy) = tri
+        det = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+        if abs(det) < 1e-12:
+            continue
+        i0, i1 = np.searchsorted(centres, [tri[:, 0].min(), tri[:, 0].max()])
+        j0, j1 = np.searchsorted(centres, [tri[:, 1].min(), tri[:, 1].max()])
+        px, py = np.meshgrid(centres[i0:i1], centres[j0:j1])
+        l1 = ((px - ax) * (cy - ay) - (py - ay) * (cx - ax)) / det
+        l2 = ((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / det
+        inside = (l1 > 1e-6) & (l2 > 1e-6) & (1 - l1 - l2 > 1e-6)
+        counts[j0:j1, i0:i1] += inside
+    return counts
+
+
+@pytest.mark.parametrize("method", ["LIGHTMAP_PACK", "XATLAS"])
+def test_unwrapped_charts_do_not_overlap(addon, empty_blend, bpy, method):
+    from blender_helpers import export
+    bpy.ops.mesh.primitive_monkey_add()
+    bpy.ops.object.light_add(type="SUN")
+    suzanne = bpy.data.objects["Suzanne"]
+    bpy.ops.object.select_all(action="DESELECT")
+    suzanne.select_set(True)
+    bpy.context.view_layer.objects.active = suzanne
+    empty_blend.detp_bake.resolution = 64
+    assert bpy.ops.detp_bake.unwrap(method=method) == {"FINISHED"}
+    sc = export(bpy, objects=["Suzanne"], resolution=64)
+    counts = _centre_hits(sc.uvs, 64)
+    assert (counts > 0).sum() > 0.2 * 64 * 64  # the charts fill a good part of the map
+    if method == "LIGHTMAP_PACK":
+        assert counts.max() == 1
+    else:
+        # Smart UV Project's islands keep each face whole, but a bent quad can fold over itself
+        # in UV space (2 texels of ~900 on Suzanne); charts never overlap each other.
+        assert (counts > 1).sum() <= 0.01 * (counts > 0).sum()
+
+
+def test_blender_command_line_handler_bakes_and_compares(addon, cornell, bpy, tmp_path, capsys):
+    from detp_bake_addon.operators import cli_command
+    code = cli_command.execute(["bake", "--photons", "20000", "--resolution", "16", "--out", str(tmp_path / "b")])
+    assert code == 0 and (tmp_path / "b" / "TallBox.disc_index.exr").exists()
+    code = cli_command.execute(["compare", "--estimators", "photon_map", "disc_index", "--photons", "20000",
+                                "--resolution", "16", "--out", str(tmp_path / "c")])
+    assert code == 0
+    summary = json.loads((tmp_path / "c" / "compare.json").read_text())
+    assert summary["estimators"] == ["photon_map", "disc_index"] and 0 < summary["difference_to_first"]["disc_index"] < 1
+    assert cli_command.execute(["bake", "--resolution", "0", "--out", str(tmp_path / "d")]) == 2
+    assert "resolution" in capsys.readouterr().err
