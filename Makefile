@@ -49,5 +49,20 @@ test-5.2:
 
 test: test-4.5 test-5.2
 
+# Extension zips, one per platform of blender_manifest.toml, each with the wheels of both Blender
+# lines (cp311 for 4.5, cp313 for 5.2; numpy is Blender's own): dist/detp_bake-<version>-<platform>.zip.
+# Built by Blender's own extension tool, which the bpy wheel ships as a standalone script.
+BLENDER_EXT = $(firstword $(wildcard $(VENV45)/lib/python3.11/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py))
+EXT_ID := $(shell sed -n 's/^id *= *"\(.*\)"/\1/p' blender_manifest.toml)
+
+.PHONY: extension
+extension: $(VENV45)/.installed
+	@test -n "$(BLENDER_EXT)" || { echo "error: blender_ext.py not found in the bpy wheel of $(VENV45)"; exit 1; }
+	rm -rf wheels dist/$(EXT_ID)-*.zip && mkdir -p dist
+	$(VENV45)/bin/python tests/extension_build.py wheels wheels
+	$(VENV45)/bin/python $(BLENDER_EXT) validate .
+	$(VENV45)/bin/python $(BLENDER_EXT) build --split-platforms --source-dir . --output-dir dist
+	@ls -l dist/$(EXT_ID)-*.zip
+
 clean:
 	rm -rf build dist .cache .pytest_cache

@@ -1,0 +1,173 @@
+"""The wheels the detp_bake extension bundles, and how its zips are built: used by `make extension`
+and tests/test_extension.py. Not part of the extension (the build excludes tests/).
+
+    python tests/extension_build.py wheels DEST   # download every wheel blender_manifest.toml lists
+
+Every wheel comes from `pip download --only-binary=:all: --no-deps --platform ... --python-version
+...` with the pins of requirements/blender-<line>.txt, and the result must be exactly the manifest's
+`wheels` list: a pin changed in requirements/ without the manifest (or the reverse) is an error
+that names the difference. numpy is Blender's own and is never bundled.
+"""
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+MANIFEST = ROOT / "blender_manifest.toml"
+
+# Blender LTS line -> the CPython it bundles.
+LINES = {"4.5": "3.11", "5.2": "3.13"}
+
+# What the extension imports at run time besides Blender's own numpy (bpy is Blender itself).
+RUNTIME = ("embreex", "OpenImageIO", "numba", "llvmlite", "scipy", "xatlas")
+
+# Blender platform -> pip --platform tags, most preferred first.
+# - linux-x64: Blender 4.5+ needs glibc 2.28, so manylinux_2_28 and older.
+# - macos-arm64: embreex 4.4 wheels need macOS 13 (numba/llvmlite 12, the rest 11), and scipy's
+#   macOS 14 (Accelerate) build must not be picked.
+# - macos-x64 is left out: numba >= 0.63 and llvmlite >= 0.46 have no Intel-mac wheels (the last are
+#   numba 0.62.1 / llvmlite 0.45.1), and Blender 5.x has no Intel-mac build at all.
+PLATFORM_TAGS = {
+    "linux-x64": [f"manylinux_2_{minor}_x86_64" for minor in range(28, 16, -1)] + ["manylinux2014_x86_64"],
+    "windows-x64": ["win_amd64"],
+    "macos-arm64": ["macosx_13_0_arm64"],
+}
+
+
+def manifest() -> dict:
+    with open(MANIFEST, "rb") as fh:
+        return tomllib.load(fh)
+
+
+def wheel_platform(filename: str) -> str:
+    """The Blender platform of a wheel file name (only the ones this extension ships)."""
+    tag = Path(filename).stem.split("-")[-1]
+    if "manylinux" in tag and tag.endswith("x86_64"):
+        return "linux-x64"
+    if tag == "win_amd64":
+        return "windows-x64"
+    if tag.startswith("macosx_") and tag.endswith("_arm64"):
+        return "macos-arm64"
+    if tag.startswith("macosx_") and tag.endswith("_x86_64"):
+        return "macos-x64"
+    raise ValueError(f"unexpected platform tag in wheel {filename!r}")
+
+
+def wheel_python(filename: str) -> str:
+    """'3.11' for a cp311 wheel."""
+    tag = Path(filename).stem.split("-")[-3]
+    m = re.fullmatch(r"cp3(\d+)", tag)
+    if not m:
+        raise ValueError(f"unexpected Python tag in wheel {filename!r}")
+    return f"3.{m.group(1)}"
+
+
+def wheel_name_version(filename: str) -> tuple[str, str]:
+    name, version = Path(filename).stem.split("-")[:2]
+    return name.lower().replace("_", "-"), version
+
+
+def manifest_wheels(python: str | None = None, platform: str | None = None) -> list[str]:
+    """The manifest's wheel paths ('./wheels/x.whl'), optionally for one Python and one platform."""
+    return [w for w in manifest().get("wheels", [])
+            if (python is None or wheel_python(w) == python)
+            and (platform is None or wheel_platform(w) == platform)]
+
+
+def pins(line: str) -> list[str]:
+    """`name==version` of every runtime package in requirements/blender-<line>.txt."""
+    found = {}
+    for raw in (ROOT / "requirements" / f"blender-{line}.txt").read_text().splitlines():
+        req = raw.split("#")[0].strip()
+        if "==" in req:
+            name, version = (s.strip() for s in req.split("=="))
+            found[name.lower()] = f"{name}=={version}"
+    missing = [p for p in RUNTIME if p.lower() not in found]
+    if missing:
+        raise SystemExit(f"requirements/blender-{line}.txt pins none of {missing}")
+    return [found[p.lower()] for p in RUNTIME]
+
+
+def download(dest: Path, python: str, platform: str, quiet: bool = True) -> None:
+    line = next(line for line, py in LINES.items() if py == python)
+    cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:",
+           "--python-version", python, "--implementation", "cp", "--dest", str(dest)]
+    for tag in PLATFORM_TAGS[platform]:
+        cmd += ["--platform", tag]
+    if quiet:
+        cmd.append("-q")
+    print(f"pip download: Python {python} (Blender {line}), {platform}", flush=True)
+    subprocess.run(cmd + pins(line), check=True)
+
+
+def check(dest: Path, expected: list[str], exact: bool) -> None:
+    """`dest` holds the expected wheel files (and nothing else when `exact`)."""
+    want = {Path(w).name for w in expected}
+    have = {p.name for p in Path(dest).glob("*.whl")}
+    missing, extra = sorted(want - have), sorted(have - want) if exact else []
+    if missing or extra:
+        msg = ["the downloaded wheels differ from blender_manifest.toml's `wheels` list"]
+        msg += [f"  listed, not downloaded: {m}" for m in missing]
+        msg += [f"  downloaded, not listed: {m}" for m in extra]
+        msg.append("  (update `wheels` in blender_manifest.toml to match requirements/blender-*.txt)")
+        raise SystemExit("\n".join(msg))
+
+
+def download_all(dest: Path) -> None:
+    """Every wheel for every Blender line and every platform of the manifest, exactly those listed."""
+    platforms = manifest()["platforms"]
+    dest.mkdir(parents=True, exist_ok=True)
+    for python in LINES.values():
+        for platform in platforms:
+            download(dest, python, platform)
+    check(dest, manifest_wheels(), exact=True)
+
+
+def download_cached(cache: Path, python: str, platform: str) -> list[Path]:
+    """The manifest's wheels for one Python and platform, from `cache` (pip only runs when one is missing)."""
+    expected = manifest_wheels(python, platform)
+    if not all((cache / Path(w).name).exists() for w in expected):
+        cache.mkdir(parents=True, exist_ok=True)
+        download(cache, python, platform)
+    check(cache, expected, exact=False)
+    return [cache / Path(w).name for w in expected]
+
+
+def blender_ext_script(bpy_version_dir: Path) -> Path:
+    """Blender's extension tool, shipped inside the bpy wheel (`bpy/<major>.<minor>/`) as a standalone script."""
+    return Path(bpy_version_dir) / "scripts" / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
+
+
+_SKIP_AT_ROOT = {".git", ".cache", "build", "dist", "wheels", ".pytest_cache"}
+
+
+def stage_source(dst: Path, wheels: list[Path], platform: str) -> Path:
+    """A copy of the extension's source whose manifest lists only `wheels` and `platform`, with those
+    wheels in place: `blender_ext.py build --split-platforms` on it builds just that platform's zip."""
+    def ignore(directory, names):
+        skip = {n for n in names if n == "__pycache__"}
+        if Path(directory).resolve() == ROOT:
+            skip |= {n for n in names if n in _SKIP_AT_ROOT or n.startswith(".venv")}
+        return skip
+
+    shutil.copytree(ROOT, dst, ignore=ignore)
+    (dst / "wheels").mkdir()
+    for w in wheels:
+        shutil.copy2(w, dst / "wheels" / w.name)
+    text = MANIFEST.read_text()
+    listed = "".join(f'\n  "./wheels/{w.name}",' for w in wheels)
+    text, n_w = re.subn(r"(?ms)^wheels\s*=\s*\[.*?\]", f"wheels = [{listed}\n]", text)
+    text, n_p = re.subn(r"(?ms)^platforms\s*=\s*\[.*?\]", f'platforms = ["{platform}"]', text)
+    assert n_w == 1 and n_p == 1, "blender_manifest.toml: expected one `wheels` and one `platforms` list"
+    (dst / "blender_manifest.toml").write_text(text)
+    return dst
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 3 or sys.argv[1] != "wheels":
+        raise SystemExit(__doc__)
+    download_all(Path(sys.argv[2]))

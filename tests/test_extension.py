@@ -1,0 +1,139 @@
+"""The extension as a user gets it. Blender's own extension tool (shipped in the bpy wheel) validates
+the source tree and builds this platform's zip with the wheels for the running Python only; the bpy
+wheel's Blender, in a fresh process that sees none of the runtime wheels except through the zip,
+installs it, bakes the Cornell box through `bpy.ops.detp_bake.bake()`, then disables and removes it.
+
+The wheels are downloaded once into .cache/extension-wheels/ (pip runs only when one is missing).
+"""
+import importlib.metadata
+import json
+import os
+import platform
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+import extension_build as eb
+from conftest import CORNELL, ROOT
+
+PY = f"{sys.version_info.major}.{sys.version_info.minor}"
+WHEEL_CACHE = ROOT / ".cache" / "extension-wheels"
+HOST = {("linux", "x86_64"): "linux-x64", ("win32", "AMD64"): "windows-x64",
+        ("darwin", "arm64"): "macos-arm64"}.get((sys.platform, platform.machine()))
+
+
+def _bpy_version_dir(bpy) -> Path:
+    """`site-packages/bpy/<major>.<minor>` of the bpy wheel (`bpy.__file__` is its scripts/modules copy)."""
+    path = Path(bpy.utils.resource_path("LOCAL"))
+    assert path.name == "{}.{}".format(*bpy.app.version[:2]) and path.parent.name == "bpy", path
+    return path
+
+
+def _blender_ext(bpy) -> Path:
+    path = eb.blender_ext_script(_bpy_version_dir(bpy))
+    assert path.is_file(), f"Blender's extension tool is not where the bpy wheel ships it: {path}"
+    return path
+
+
+def _run(*args, **kw):
+    return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, **kw)
+
+
+def test_blender_ext_validates_the_source_tree(bpy):
+    proc = _run(_blender_ext(bpy), "validate", ROOT)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "Success" in proc.stdout
+
+
+def test_manifest_wheels_are_the_pinned_runtime_wheels_for_every_line_and_platform():
+    manifest = eb.manifest()
+    assert PY in eb.LINES.values(), f"Python {PY} is not the Python of a supported Blender line {eb.LINES}"
+    assert manifest["platforms"] and set(manifest["platforms"]) <= set(eb.PLATFORM_TAGS)
+    assert len(set(manifest["wheels"])) == len(manifest["wheels"])
+    for line, python in eb.LINES.items():
+        pinned = sorted((p.split("==")[0].lower(), p.split("==")[1]) for p in eb.pins(line))
+        for plat in manifest["platforms"]:
+            listed = sorted(eb.wheel_name_version(w) for w in eb.manifest_wheels(python, plat))
+            assert listed == pinned, f"Blender {line} (Python {python}) on {plat}"
+    assert {eb.wheel_platform(w) for w in manifest["wheels"]} == set(manifest["platforms"])
+    assert {eb.wheel_python(w) for w in manifest["wheels"]} == set(eb.LINES.values())
+
+
+@pytest.fixture(scope="module")
+def built_zip(bpy, tmp_path_factory):
+    if HOST is None:
+        pytest.skip(f"the extension ships no zip for this machine ({sys.platform}, {platform.machine()})")
+    wheels = eb.download_cached(WHEEL_CACHE, PY, HOST)
+    tmp = tmp_path_factory.mktemp("extension")
+    src = eb.stage_source(tmp / "src", wheels, HOST)
+    proc = _run(_blender_ext(bpy), "build", "--split-platforms", "--source-dir", src, "--output-dir", tmp)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    path = tmp / f"{eb.manifest()['id']}-{eb.manifest()['version']}-{HOST.replace('-', '_')}.zip"
+    assert path.is_file(), proc.stdout
+    return path
+
+
+def test_zip_holds_the_add_on_and_this_pythons_wheels_only(bpy, built_zip):
+    names = zipfile.ZipFile(built_zip).namelist()
+    assert {"__init__.py", "blender_manifest.toml", "detp_bake/bake.py", "operators/bake.py",
+            "ui/properties.py"} <= set(names)
+    assert sorted(n for n in names if n.startswith("wheels/")) == \
+        sorted(f"wheels/{Path(w).name}" for w in eb.manifest_wheels(PY, HOST))
+    for name in names:
+        top = name.split("/")[0]
+        assert top not in {"tests", "benchmarks", "sample_scenes", "requirements", "Makefile", "build", "dist"}, name
+        assert "__pycache__" not in name and not name.endswith((".pyc", ".nbi", ".nbc", ".blend")), name
+    proc = _run(_blender_ext(bpy), "validate", built_zip)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def _blender_like_site(bpy, dst: Path) -> Path:
+    """The test environment's site-packages without the extension's runtime wheels, as links."""
+    site_packages = _bpy_version_dir(bpy).parent.parent
+    hidden = {f.parts[0] for name in eb.RUNTIME for f in importlib.metadata.distribution(name).files
+              if f.parts[0] != ".."}
+    dst.mkdir()
+    for entry in site_packages.iterdir():
+        if entry.name not in hidden and entry.suffix != ".pth":
+            (dst / entry.name).symlink_to(entry, target_is_directory=entry.is_dir())
+    return dst
+
+
+def test_install_bake_disable_uninstall(bpy, built_zip, tmp_path):
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith(("BLENDER_USER_", "NUMBA_", "PYTHON"))}
+    env["BLENDER_USER_RESOURCES"] = str(tmp_path / "blender-user")
+    out, result = tmp_path / "lightmaps", tmp_path / "result.json"
+    site = _blender_like_site(bpy, tmp_path / "site")
+    proc = subprocess.run([sys.executable, "-S", str(ROOT / "tests" / "extension_session.py"), site, built_zip,
+                           CORNELL, out, result], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=900)
+    log = f"--- stdout\n{proc.stdout[-4000:]}\n--- stderr\n{proc.stderr[-4000:]}"
+    assert proc.returncode == 0 and result.exists(), log
+    r = json.loads(result.read_text())
+    assert "error" not in r, r.get("error", "") + log
+    assert r["preinstalled"] == [], "the Blender session must see the runtime wheels only through the zip"
+
+    assert r["install"] == ["FINISHED"] and r["installed_dir"], log
+    state = r["after_install"]
+    assert state["addon_enabled"] and "bake" in state["ops"] and state["types"] \
+        and "Scene" in state["properties"], state
+
+    assert r["bake"] == ["FINISHED"], log
+    assert r["exr"] and all(n.endswith(".exr") and (out / n).stat().st_size > 0 for n in r["exr"]), r["exr"]
+    assert {"embreex", "numba", "llvmlite", "OpenImageIO"} <= set(r["imported_by_bake"])
+    for name, path in r["module_files"].items():  # from the bundled wheels, nowhere else
+        assert any(path.startswith(sp) for sp in r["wheel_site_packages"]), (name, path)
+    assert Path(r["numba_cache_dir"]) == Path(r["numba_user_path"]), "numba's cache must be the extension's user folder"
+    assert r["numba_cache_files"] > 0
+
+    assert r["disable"] == ["FINISHED"]
+    for state in (r["after_disable"], r["after_uninstall"]):
+        assert state == {"addon_enabled": False, "ops": [], "types": [], "properties": []}, state
+    assert r["uninstall"] == ["FINISHED"]
+    assert not r["left_in_repo"]
+    assert not [n for n in r["left_wheels"] if n.split("-")[0].split(".")[0].lower() in
+                {p.lower() for p in eb.RUNTIME}], r["left_wheels"]
