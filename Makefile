@@ -64,5 +64,24 @@ extension: $(VENV45)/.installed
 	$(VENV45)/bin/python $(BLENDER_EXT) build --split-platforms --source-dir . --output-dir dist
 	@ls -l dist/$(EXT_ID)-*.zip
 
+# Benchmarks (timings never live in tests): short runs take minutes on 2 cores, full ones hours.
+BENCH_OUT ?= benchmarks/results
+$(VENV45)/.bench: $(VENV45)/.installed requirements/bench.txt
+	$(VENV45)/bin/python -m pip install -q -r requirements/bench.txt
+	touch $@
+
+bench: $(VENV45)/.bench
+	$(VENV45)/bin/python benchmarks/trace.py --json $(BENCH_OUT)/trace.json
+	$(VENV45)/bin/python benchmarks/estimators.py --photons 300000 --json $(BENCH_OUT)/estimators.json
+	$(VENV45)/bin/python benchmarks/paper.py --out $(BENCH_OUT)
+	$(VENV45)/bin/python benchmarks/quality.py --out $(BENCH_OUT)
+
+bench-full: $(VENV45)/.bench
+	$(VENV45)/bin/python benchmarks/trace.py --json $(BENCH_OUT)/trace.json
+	$(VENV45)/bin/python benchmarks/estimators.py --json $(BENCH_OUT)/estimators.json
+	$(VENV45)/bin/python benchmarks/disc_index_embree.py
+	$(VENV45)/bin/python benchmarks/paper.py --full --out $(BENCH_OUT)
+	$(VENV45)/bin/python benchmarks/quality.py --full --out $(BENCH_OUT)
+
 clean:
-	rm -rf build dist .cache .pytest_cache
+	rm -rf build dist wheels .cache .pytest_cache
