@@ -35,7 +35,9 @@ def scene_snapshot(bpy):
     slots = {o.name: [s.material.name if s.material else None for s in o.material_slots]
              for o in bpy.data.objects}
     uvs = {m.name: [l.name for l in m.uv_layers] for m in bpy.data.meshes}
-    props = {o.name: sorted(o.keys()) for o in bpy.data.objects}
+    # Blender 4.5 stores a registered PointerProperty group ("detp_bake") once it is read:
+    # that is the add-on's own settings storage, not a change to the user's data.
+    props = {o.name: sorted(k for k in o.keys() if k != "detp_bake") for o in bpy.data.objects}
     return {"materials": mats, "slots": slots, "images": sorted(i.name for i in bpy.data.images),
             "uvs": uvs, "props": props}
 

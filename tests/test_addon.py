@@ -1,5 +1,6 @@
 """The extension inside Blender (bpy wheel, background mode): registration, panels, the bake job
 with its worker and cancel, apply/revert, compare, unwrap and the `blender -c` command."""
+import importlib
 import importlib.util
 import json
 import sys
@@ -14,8 +15,20 @@ PACKAGE = "detp_bake_addon"
 
 
 def _import_addon():
+    """Import the repository root as the add-on package. Its core subpackage is the very
+    `detp_bake` the other tests use: numba's on-disk cache records each kernel's module name, so
+    one source file must not be compiled under two package names."""
     if PACKAGE in sys.modules:
         return sys.modules[PACKAGE]
+    import pkgutil
+
+    import detp_bake
+    for info in pkgutil.walk_packages(detp_bake.__path__, "detp_bake."):
+        if info.name != "detp_bake.__main__":
+            importlib.import_module(info.name)
+    for name, module in list(sys.modules.items()):
+        if name == "detp_bake" or name.startswith("detp_bake."):
+            sys.modules[f"{PACKAGE}.{name}"] = module
     spec = importlib.util.spec_from_file_location(PACKAGE, ROOT / "__init__.py", submodule_search_locations=[str(ROOT)])
     module = importlib.util.module_from_spec(spec)
     sys.modules[PACKAGE] = module
