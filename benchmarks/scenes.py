@@ -15,19 +15,25 @@ if str(ROOT) not in sys.path:
 
 from detp_bake.scene import AreaLight, BakeObject, PointLight, Scene  # noqa: E402
 
-CORNELL = ROOT / "sample_scenes" / "cornell_box.blend"
+SAMPLES = ROOT / "sample_scenes"
 
 
-def cornell_box(resolution: int = 64) -> Scene:
-    """The bundled open-front Cornell box (184 triangles, one 60 W area light), exported by the
-    adapter. Imports bpy, with Blender's user folder in a temp dir unless one is set already."""
+def blend_scene(name: str, resolution: int = 64) -> Scene:
+    """sample_scenes/<name>.blend exported by the adapter, every visible mesh baked at
+    `resolution`; the file stays open in bpy. Imports bpy, with Blender's user folder in a temp
+    dir unless one is set already."""
     os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="detp_bench_blender_"))
     import bpy
     from detp_bake.blender_scene import export_scene
 
-    bpy.ops.wm.open_mainfile(filepath=str(CORNELL))
+    bpy.ops.wm.open_mainfile(filepath=str(SAMPLES / f"{name}.blend"))
     return export_scene(bpy.context.scene, bpy.context.evaluated_depsgraph_get(), None, None,
                         resolution, log=lambda msg: None)
+
+
+def cornell_box(resolution: int = 64) -> Scene:
+    """The bundled open-front Cornell box: 184 triangles, one 60 W area light."""
+    return blend_scene("cornell_box", resolution)
 
 
 def _quad_grid(corner, u_edge, v_edge, nu: int, nv: int, height=None):
@@ -89,7 +95,7 @@ def dense_room(triangles: int = 100_000) -> Scene:
         return 0.05 * np.sin(9 * s) * np.cos(7 * t) + 0.02 * np.sin(31 * s + 17 * t)
 
     objects = [("Floor", [_quad_grid((0, 0, 0), (size[0], 0, 0), (0, size[1], 0), nf, nf, bumps)], 0.6)]
-    room = _box_faces((0, 0, 0), size, nw, inward=True)
+    room = _box_faces((0, 0, -0.1), size, nw, inward=True)  # walls reach below the bumps
     objects.append(("Walls", room[1:], 0.7))  # the box's -Z face is replaced by the floor
     boxes = [((1.0, 1.0, 0.0), (2.2, 2.0, 1.0)), ((5.0, 1.5, 0.0), (6.5, 2.5, 2.0)),
              ((3.0, 3.8, 0.0), (4.0, 4.8, 0.6)), ((6.0, 4.0, 0.0), (7.2, 5.2, 1.4))]
