@@ -1,0 +1,56 @@
+"""Every benchmark script runs on a tiny configuration, so none of them can rot. Timings are not
+checked here (they live in benchmarks/); the outputs' shape and sanity are."""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from conftest import ROOT
+
+BENCH = ROOT / "benchmarks"
+
+
+def _run(script, *args, timeout=600):
+    env = dict(os.environ, PYTHONPATH=str(ROOT), MPLBACKEND="Agg")
+    proc = subprocess.run([sys.executable, str(BENCH / script), *args], capture_output=True, text=True,
+                          env=env, cwd=ROOT, timeout=timeout)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return proc.stdout
+
+
+def test_estimators_benchmark(tmp_path):
+    out = tmp_path / "estimators.json"
+    text = _run("estimators.py", "--quick", "--scenes", "dense", "--json", str(out))
+    data = json.loads(out.read_text())["results"][0]
+    assert "disc_index is" in text and data["segments"] > data["photons"]
+    by = {(r["estimator"], r["radius_texels"]): r for r in data["radius_sweep"]}
+    # Same photons, same rule: both accelerations find the same crossings at every radius.
+    for (name, radius), row in by.items():
+        assert row["crossings"] == by[("disc_index", radius)]["crossings"] > 0
+
+
+def test_trace_benchmark(tmp_path):
+    out = tmp_path / "trace.json"
+    _run("trace.py", "--quick", "--json", str(out))
+    rows = json.loads(out.read_text())
+    rows = rows["results"] if isinstance(rows, dict) else rows
+    assert rows and all(r["segments"] > 0 for r in rows)
+
+
+def test_paper_benchmark(tmp_path):
+    _run("paper.py", "--quick", "--scenes", "tree", "--out", str(tmp_path))
+    data = json.loads((tmp_path / "paper.json").read_text())["results"]["tree"]
+    assert {r["estimator"] for r in data["radius"]} == {"sphere_cache", "disc_index"}
+    assert "fitted exponent" in (tmp_path / "paper.md").read_text()
+
+
+def test_quality_benchmark(tmp_path):
+    _run("quality.py", "--quick", "--scenes", "cornell_box", "--out", str(tmp_path))
+    res = json.loads((tmp_path / "quality.json").read_text())["results"][0]
+    methods = {r["method"] for r in res["rows"]}
+    assert {"disc_index", "photon_map", "cycles"} <= methods
+    assert all(0 < r["rmse"] < 2 for r in res["rows"])
+    # The reference is cached: a second run does not bake it again.
+    assert list((tmp_path / "cache").glob("cornell_box-*.npz"))
