@@ -13,32 +13,57 @@ from typing import Callable
 import numpy as np
 
 from . import sampling
+from .sampling import (cosine_hemisphere, inline, jit, orthonormal_basis, photon_rng, uniform2, uniform_cone,
+                       uniform_disc, uniform_sphere, uniform_triangle)
 from .errors import BakeError
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
 
-# sample(count, total_count, rng) -> origins (n,3), directions (n,3), flux per photon (n,3)
-Sampler = Callable[[int, int, np.random.Generator], tuple[np.ndarray, np.ndarray, np.ndarray]]
+# emit(key, first_id, count, total_count, origins, directions, flux, rng): writes `count` photons,
+# ids first_id, first_id + 1, …, into rows 0 … count − 1 of the (N, 3) float32 or float64 arrays,
+# and each photon's random state after emission into `rng` (uint64; an empty array: not kept).
+# A photon carries 1/total_count of its emitter's flux.
+Emit = Callable[[np.uint64, int, int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
 
 
 @dataclass
 class Emitter:
     name: str
     flux: np.ndarray  # RGB watts actually emitted
-    sample: Sampler
+    emit: Emit
 
     @property
     def weight(self) -> float:
         return float(np.mean(self.flux))
 
+    def sample(self, n: int, total: int, rng: np.random.Generator):
+        """n photons (float64 origins, directions, flux) keyed by a draw from `rng`."""
+        out = [np.empty((n, 3)) for _ in range(3)]
+        self.emit(np.uint64(rng.integers(2 ** 64, dtype=np.uint64)), 0, int(n), int(total), *out,
+                  np.empty(0, np.uint64))
+        return tuple(out)
+
+
+@inline
+def _spot_att(c, cos_half, smooth):
+    if smooth <= 0.0:
+        return 1.0 if c > cos_half else 0.0
+    t = min(max((c - cos_half) / smooth, 0.0), 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+@jit
+def _spot_att_all(c, cos_half, smooth):
+    out = np.empty_like(c)
+    for i in range(c.shape[0]):
+        out[i] = _spot_att(c[i], cos_half, smooth)
+    return out
+
 
 def spot_attenuation(cos_angle: np.ndarray, spot_size: float, blend: float) -> np.ndarray:
     """Cycles' spot falloff: smoothstep from the cone's rim over a `blend` share of (1 - cos)."""
+    c = np.asarray(cos_angle, np.float64)
     cos_half = np.cos(0.5 * spot_size)
-    smooth = (1.0 - cos_half) * blend
-    if smooth <= 0.0:
-        return (cos_angle > cos_half).astype(np.float64)
-    t = np.clip((cos_angle - cos_half) / smooth, 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
+    return _spot_att_all(c.ravel(), cos_half, (1.0 - cos_half) * blend).reshape(c.shape)
 
 
 def _spot_solid_angle(spot_size: float, blend: float) -> float:
@@ -52,26 +77,64 @@ def _spot_solid_angle(spot_size: float, blend: float) -> float:
         float(2.0 * np.pi * np.trapz(att, c))
 
 
-def _uniform(n, rng, k):
-    return rng.random((k, n))
+@inline
+def _put(a, i, x, y, z):
+    a[i, 0] = x
+    a[i, 1] = y
+    a[i, 2] = z
+
+
+@inline
+def _draw4(key, photon_id):
+    """A photon's random state after four uniforms, and the uniforms."""
+    r = photon_rng(key, photon_id)
+    r, u0, u1 = uniform2(r)
+    r, u2, u3 = uniform2(r)
+    return r, u0, u1, u2, u3
+
+
+@inline
+def _keep(rng, i, r):
+    if rng.shape[0] > 0:
+        rng[i] = r
+
+
+@jit
+def _emit_point(key, first, n, pos, radius, flux, o, d, f, rng):
+    for i in range(n):
+        r, u0, u1, u2, u3 = _draw4(key, first + i)
+        nx, ny, nz = uniform_sphere(u0, u1)
+        if radius > 0.0:
+            _put(o, i, pos[0] + radius * nx, pos[1] + radius * ny, pos[2] + radius * nz)
+            dx, dy, dz = cosine_hemisphere(nx, ny, nz, u2, u3)
+            _put(d, i, dx, dy, dz)
+        else:
+            _put(o, i, pos[0], pos[1], pos[2])
+            _put(d, i, nx, ny, nz)
+        _put(f, i, flux[0], flux[1], flux[2])
+        _keep(rng, i, r)
 
 
 def point_emitter(light: PointLight) -> Emitter:
     power = np.asarray(light.power, np.float64)
     pos = np.asarray(light.position, np.float64)
 
-    def sample(n, total, rng):
-        u = _uniform(n, rng, 4)
-        if light.radius > 0.0:
-            normal = sampling.uniform_sphere(u[0], u[1])
-            origins = pos + light.radius * normal
-            dirs = sampling.cosine_hemisphere(normal, u[2], u[3])
-        else:
-            origins = np.broadcast_to(pos, (n, 3)).copy()
-            dirs = sampling.uniform_sphere(u[0], u[1])
-        return origins, dirs, np.broadcast_to(power / total, (n, 3)).copy()
+    def emit(key, first, n, total, o, d, f, rng):
+        _emit_point(key, first, n, pos, float(light.radius), power / total, o, d, f, rng)
 
-    return Emitter(light.name, power, sample)
+    return Emitter(light.name, power, emit)
+
+
+@jit
+def _emit_spot(key, first, n, pos, axis, cos_half, smooth, scale, o, d, f, rng):
+    for i in range(n):
+        r, u0, u1, u2, u3 = _draw4(key, first + i)
+        dx, dy, dz = uniform_cone(axis[0], axis[1], axis[2], cos_half, u0, u1)
+        att = _spot_att(dx * axis[0] + dy * axis[1] + dz * axis[2], cos_half, smooth)
+        _put(o, i, pos[0], pos[1], pos[2])
+        _put(d, i, dx, dy, dz)
+        _put(f, i, scale[0] * att, scale[1] * att, scale[2] * att)
+        _keep(rng, i, r)
 
 
 def spot_emitter(light: SpotLight) -> Emitter:
@@ -83,15 +146,36 @@ def spot_emitter(light: SpotLight) -> Emitter:
     cos_half = np.cos(0.5 * spot_size)
     cone = 2.0 * np.pi * (1.0 - cos_half)
     flux = power / (4.0 * np.pi) * _spot_solid_angle(spot_size, light.blend)
+    smooth = (1.0 - cos_half) * light.blend
 
-    def sample(n, total, rng):
-        u = _uniform(n, rng, 2)
-        dirs = sampling.uniform_cone(axis, cos_half, u[0], u[1])
-        att = spot_attenuation(dirs @ axis, spot_size, light.blend)
-        per = (power / (4.0 * np.pi) * cone / total)[None, :] * att[:, None]
-        return np.broadcast_to(pos, (n, 3)).copy(), dirs, per
+    def emit(key, first, n, total, o, d, f, rng):
+        scale = power / (4.0 * np.pi) * cone / total
+        _emit_spot(key, first, n, pos, axis, cos_half, smooth, scale, o, d, f, rng)
 
-    return Emitter(light.name, flux, sample)
+    return Emitter(light.name, flux, emit)
+
+
+@jit
+def _emit_parallel(key, first, n, axis, cos_max, centre, radius, flux, o, d, f, rng):
+    """Sun (axis given, cos_max < 1 for a disc of directions) or world (no axis: any direction).
+    Photons start on a disc of the scene's bounding radius perpendicular to their own direction,
+    2 radii out, which keeps the irradiance uniform."""
+    for i in range(n):
+        r, u0, u1, u2, u3 = _draw4(key, first + i)
+        if axis.shape[0] == 0:
+            dx, dy, dz = uniform_sphere(u2, u3)
+        elif cos_max < 1.0:
+            dx, dy, dz = uniform_cone(axis[0], axis[1], axis[2], cos_max, u2, u3)
+        else:
+            dx, dy, dz = axis[0], axis[1], axis[2]
+        px, py = uniform_disc(u0, u1)
+        t, s = orthonormal_basis(dx, dy, dz)
+        _put(o, i, centre[0] + radius * (px * t[0] + py * s[0]) - 2.0 * radius * dx,
+             centre[1] + radius * (px * t[1] + py * s[1]) - 2.0 * radius * dy,
+             centre[2] + radius * (px * t[2] + py * s[2]) - 2.0 * radius * dz)
+        _put(d, i, dx, dy, dz)
+        _put(f, i, flux[0], flux[1], flux[2])
+        _keep(rng, i, r)
 
 
 def sun_emitter(light: SunLight, centre: np.ndarray, radius: float) -> Emitter:
@@ -100,48 +184,75 @@ def sun_emitter(light: SunLight, centre: np.ndarray, radius: float) -> Emitter:
     axis = np.asarray(light.direction, np.float64)
     axis = axis / np.linalg.norm(axis)
     flux = e * np.pi * radius ** 2
-    cos_max = np.cos(0.5 * light.angle)
+    cos_max = float(np.cos(0.5 * light.angle)) if light.angle > 0.0 else 1.0
+    centre = np.asarray(centre, np.float64)
 
-    def sample(n, total, rng):
-        u = _uniform(n, rng, 4)
-        if light.angle > 0.0:
-            dirs = sampling.uniform_cone(axis, cos_max, u[2], u[3])
+    def emit(key, first, n, total, o, d, f, rng):
+        _emit_parallel(key, first, n, axis, cos_max, centre, float(radius), flux / total, o, d, f, rng)
+
+    return Emitter(light.name, flux, emit)
+
+
+@jit
+def _emit_area(key, first, n, m, normal, disc, sx, sy, flux, o, d, f, rng):
+    for i in range(n):
+        r, u0, u1, u2, u3 = _draw4(key, first + i)
+        if disc:
+            px, py = uniform_disc(u0, u1)
+            lx, ly = 0.5 * sx * px, 0.5 * sy * py
         else:
-            dirs = np.broadcast_to(axis, (n, 3)).copy()
-        # A disc perpendicular to each photon's own direction keeps the irradiance uniform.
-        dx, dy = sampling.uniform_disc(u[0], u[1])
-        t, s = sampling.orthonormal_basis(dirs)
-        origins = centre + radius * (dx[:, None] * t + dy[:, None] * s) - 2.0 * radius * dirs
-        return origins, dirs, np.broadcast_to(flux / total, (n, 3)).copy()
-
-    return Emitter(light.name, flux, sample)
+            lx, ly = (u0 - 0.5) * sx, (u1 - 0.5) * sy
+        _put(o, i, m[0, 0] * lx + m[0, 1] * ly + m[0, 3], m[1, 0] * lx + m[1, 1] * ly + m[1, 3],
+             m[2, 0] * lx + m[2, 1] * ly + m[2, 3])
+        dx, dy, dz = cosine_hemisphere(normal[0], normal[1], normal[2], u2, u3)
+        _put(d, i, dx, dy, dz)
+        _put(f, i, flux[0], flux[1], flux[2])
+        _keep(rng, i, r)
 
 
 def area_emitter(light: AreaLight) -> Emitter:
     power = np.asarray(light.power, np.float64)
-    m = np.asarray(light.matrix, np.float64)
+    m = np.ascontiguousarray(light.matrix, np.float64)
     # Normals transform with the inverse transpose; the light faces local -Z.
     normal = np.linalg.inv(m[:3, :3]).T @ np.array([0.0, 0.0, -1.0])
     normal /= np.linalg.norm(normal)
     shape = light.shape.upper()
     if shape not in ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE"):
         raise BakeError(f"area light '{light.name}' has unknown shape {light.shape}")
-    sx = light.size_x
-    sy = light.size_x if shape in ("SQUARE", "DISK") else light.size_y
+    sx = float(light.size_x)
+    sy = float(light.size_x if shape in ("SQUARE", "DISK") else light.size_y)
+    disc = shape in ("DISK", "ELLIPSE")
 
-    def sample(n, total, rng):
-        u = _uniform(n, rng, 4)
-        if shape in ("SQUARE", "RECTANGLE"):
-            lx, ly = (u[0] - 0.5) * sx, (u[1] - 0.5) * sy
-        else:
-            dx, dy = sampling.uniform_disc(u[0], u[1])
-            lx, ly = 0.5 * sx * dx, 0.5 * sy * dy
-        local = np.stack([lx, ly, np.zeros(n), np.ones(n)], axis=1)
-        origins = (local @ m.T)[:, :3]
-        dirs = sampling.cosine_hemisphere(np.broadcast_to(normal, (n, 3)), u[2], u[3])
-        return origins, dirs, np.broadcast_to(power / total, (n, 3)).copy()
+    def emit(key, first, n, total, o, d, f, rng):
+        _emit_area(key, first, n, m, normal, disc, sx, sy, power / total, o, d, f, rng)
 
-    return Emitter(light.name, power, sample)
+    return Emitter(light.name, power, emit)
+
+
+@jit
+def _emit_mesh(key, first, n, cdf, p, normal, tri_flux, offset, o, d, f, rng):
+    """tri_flux: each triangle's RGB flux over its probability and over total_count."""
+    last = cdf.shape[0] - 1
+    for i in range(n):
+        r, u0, u1, u2, u3 = _draw4(key, first + i)
+        r, u4, u5 = uniform2(r)
+        lo, hi = 0, last  # the first triangle whose cdf exceeds u0
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if cdf[mid] <= u0:
+                lo = mid + 1
+            else:
+                hi = mid
+        b0, b1, b2 = uniform_triangle(u1, u2)
+        side = 1.0 if u5 < 0.5 else -1.0
+        nx, ny, nz = side * normal[lo, 0], side * normal[lo, 1], side * normal[lo, 2]
+        _put(o, i, b0 * p[lo, 0, 0] + b1 * p[lo, 1, 0] + b2 * p[lo, 2, 0] + offset * nx,
+             b0 * p[lo, 0, 1] + b1 * p[lo, 1, 1] + b2 * p[lo, 2, 1] + offset * ny,
+             b0 * p[lo, 0, 2] + b1 * p[lo, 1, 2] + b2 * p[lo, 2, 2] + offset * nz)
+        dx, dy, dz = cosine_hemisphere(nx, ny, nz, u3, u4)
+        _put(d, i, dx, dy, dz)
+        _put(f, i, tri_flux[lo, 0], tri_flux[lo, 1], tri_flux[lo, 2])
+        _keep(rng, i, r)
 
 
 def mesh_emitter(scene: Scene, offset: float) -> Emitter | None:
@@ -163,38 +274,27 @@ def mesh_emitter(scene: Scene, offset: float) -> Emitter | None:
     w = tri_flux.mean(axis=1)
     cdf = np.cumsum(w)
     cdf /= cdf[-1]
-    total_w = w.sum()
+    # Picked in proportion to mean flux: a photon carries its triangle's RGB flux over its probability.
+    per_pick = tri_flux * (w.sum() / w)[:, None]
+    p, normal = np.ascontiguousarray(p), np.ascontiguousarray(normal)
 
-    def sample(n, total, rng):
-        u = _uniform(n, rng, 6)
-        k = np.minimum(np.searchsorted(cdf, u[0], side="right"), len(cdf) - 1)
-        b0, b1, b2 = sampling.uniform_triangle(u[1], u[2])
-        side = np.where(u[5] < 0.5, 1.0, -1.0)[:, None]
-        nrm = normal[k] * side
-        origins = b0[:, None] * p[k, 0] + b1[:, None] * p[k, 1] + b2[:, None] * p[k, 2]
-        origins += offset * nrm
-        dirs = sampling.cosine_hemisphere(nrm, u[3], u[4])
-        # Picked in proportion to mean flux: carry that triangle's RGB flux over its probability.
-        per = tri_flux[k] * (total_w / w[k])[:, None] / total
-        return origins, dirs, per
+    def emit(key, first, n, total, o, d, f, rng):
+        _emit_mesh(key, first, n, cdf, p, normal, per_pick / total, float(offset), o, d, f, rng)
 
-    return Emitter("emissive meshes", flux, sample)
+    return Emitter("emissive meshes", flux, emit)
 
 
 def world_emitter(radiance: np.ndarray, centre: np.ndarray, radius: float) -> Emitter:
     """Uniform sky radiance L: a flux of L·πR²·4π crosses the bounding sphere inwards."""
     radiance = np.asarray(radiance, np.float64)
     flux = radiance * 4.0 * np.pi ** 2 * radius ** 2
+    centre = np.asarray(centre, np.float64)
+    no_axis = np.zeros(0)
 
-    def sample(n, total, rng):
-        u = _uniform(n, rng, 4)
-        dirs = sampling.uniform_sphere(u[0], u[1])
-        dx, dy = sampling.uniform_disc(u[2], u[3])
-        t, s = sampling.orthonormal_basis(dirs)
-        origins = centre + radius * (dx[:, None] * t + dy[:, None] * s) - 2.0 * radius * dirs
-        return origins, dirs, np.broadcast_to(flux / total, (n, 3)).copy()
+    def emit(key, first, n, total, o, d, f, rng):
+        _emit_parallel(key, first, n, no_axis, -1.0, centre, float(radius), flux / total, o, d, f, rng)
 
-    return Emitter("world", flux, sample)
+    return Emitter("world", flux, emit)
 
 
 def build_emitters(scene: Scene) -> list[Emitter]:
@@ -234,7 +334,8 @@ def allocate(emitters: list[Emitter], photons: int) -> np.ndarray:
 
 
 class PhotonSchedule:
-    """Photon i of the whole bake belongs to one emitter; batch j draws photons [j·B, (j+1)·B)."""
+    """Photon i of the whole bake belongs to one emitter (emitters in order, each a run of ids);
+    its origin, direction and flux depend on the seed and i alone."""
 
     def __init__(self, emitters: list[Emitter], photons: int, seed: int):
         self.emitters = emitters
@@ -242,17 +343,25 @@ class PhotonSchedule:
         self.starts = np.concatenate([[0], np.cumsum(self.counts)])
         self.total = int(self.starts[-1])
         self.seed = seed
+        self.key = sampling.seed_key(seed)
 
     @property
     def emitted_flux(self) -> np.ndarray:
         return np.sum([e.flux for e in self.emitters], axis=0)
 
-    def batch(self, index: int, start: int, stop: int):
-        rng = np.random.default_rng([self.seed, index])
-        parts = []
+    def emit(self, start: int, stop: int, origins: np.ndarray, dirs: np.ndarray, flux: np.ndarray,
+             rng: np.ndarray) -> None:
+        """Photons [start, stop) into rows 0 … stop − start of the (N, 3) arrays (float32 or 64),
+        their random states into `rng` (uint64; empty: not kept)."""
         for e, a, b, total in zip(self.emitters, self.starts[:-1], self.starts[1:], self.counts):
-            lo, hi = max(a, start), min(b, stop)
+            lo, hi = max(int(a), start), min(int(b), stop)
             if hi > lo:
-                parts.append(e.sample(int(hi - lo), int(total), rng))
-        origins, dirs, flux = (np.concatenate(x) for x in zip(*parts))
-        return origins, dirs, flux
+                rows = slice(lo - start, hi - start)
+                e.emit(self.key, lo, hi - lo, int(total), origins[rows], dirs[rows], flux[rows],
+                       rng[rows] if len(rng) else rng)
+
+    def photons(self, start: int, stop: int):
+        """Photons [start, stop) as float64 (origins, directions, flux)."""
+        out = [np.empty((stop - start, 3)) for _ in range(3)]
+        self.emit(start, stop, *out, np.empty(0, np.uint64))
+        return tuple(out)

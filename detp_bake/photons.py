@@ -4,11 +4,14 @@ records density estimators use — path segments (DETP family) and surface hits 
 A bounce is one diffuse reflection. `bounces` caps the reflections a photon may have made before it
 lands (0 = direct light only), exactly as Cycles' Light Paths › Diffuse bounces does for its bake.
 Reflection uses Russian roulette with survival probability max(albedo), so the expected flux is
-exact and a path ends on its own in closed scenes. Batches are independent and seeded by
-(seed, batch index), so a bake is deterministic for a seed whatever the thread count.
+exact and a path ends on its own in closed scenes. Every random number of a photon's path is a
+hash of (seed, photon id, bounce) (`sampling.py`), and records are laid out in an order fixed by the
+batch size alone, so a bake is deterministic for a seed whatever the thread count.
 """
 from __future__ import annotations
 
+import sys
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -19,6 +22,7 @@ import numpy as np
 
 from .errors import BakeCancelled
 from .lights import PhotonSchedule, build_emitters
+from .sampling import cosine_hemisphere, jit, uniform2
 from .scene import Scene
 
 
@@ -59,118 +63,293 @@ class TraceStats:
     escaped: np.ndarray = field(default_factory=lambda: np.zeros(3))
     truncated: np.ndarray = field(default_factory=lambda: np.zeros(3))
     seconds: float = 0.0
-    embree_seconds: float = 0.0
+    embree_seconds: float = 0.0  # time in Embree calls, summed over the threads
 
 
 class RayCaster:
-    """An Embree scene of all triangles; `intersect` splits a batch across threads, since one
-    embreex `run` call uses one core (it releases the GIL)."""
+    """An Embree scene of all triangles, its BVH built at construction. One `intersect` call is
+    one embreex `run`, which uses one core and releases the GIL: the tracer calls it from several
+    threads at once."""
 
-    MIN_CHUNK = 2048
-
-    def __init__(self, positions: np.ndarray, threads: int):
+    def __init__(self, positions: np.ndarray):
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 
         self.scene = rtcore_scene.EmbreeScene()
         self._mesh = TriangleMesh(self.scene, np.ascontiguousarray(positions, np.float32))
-        self.threads = max(1, int(threads))
-        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+        # embreex builds the BVH on the first run: do it now, not in the first batch.
+        self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), output=True)
 
-    def _run(self, origins, dirs):
-        r = self.scene.run(origins, dirs, output=True)
+    def intersect(self, origins: np.ndarray, dirs: np.ndarray, tfar: Optional[np.ndarray] = None):
+        """Closest hit per ray of float32 (N, 3) arrays: (tfar, primID (-1 = miss), unnormalised
+        geometric normal). A given float32 `tfar` holds each ray's far limit (1e37: none) and
+        receives the hit distances in place."""
+        r = self.scene.run(origins, dirs, dists=tfar, output=True)
         return r["tfar"], r["primID"], r["Ng"]
 
-    def intersect(self, origins: np.ndarray, dirs: np.ndarray):
-        """Closest hit per ray: (tfar, primID (-1 = miss), unnormalised geometric normal)."""
-        origins = np.ascontiguousarray(origins, np.float32)
-        dirs = np.ascontiguousarray(dirs, np.float32)
-        n = len(origins)
-        parts = min(self.threads, max(1, n // self.MIN_CHUNK))
-        if parts == 1 or self._pool is None:
-            return self._run(origins, dirs)
-        bounds = np.linspace(0, n, parts + 1).astype(np.int64)
-        jobs = [self._pool.submit(self._run, origins[a:b], dirs[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
-        out = [j.result() for j in jobs]
-        return tuple(np.concatenate(x) for x in zip(*out))
 
-    def close(self):
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
+RAY_FAR = 1e37  # a ray's initial tfar: no limit
 
 
-@numba.njit(cache=True, parallel=True)
-def _scatter(origins, dirs, flux, tfar, prim, ng, albedo, bounce, max_bounces, u,
-             centre, escape_radius, eps, seg_length, hit_pos, hit_normal, next_origin,
-             next_dir, next_flux, survive, absorbed, escaped, truncated):
-    """Per ray: segment length, hit record, and the Russian-roulette diffuse reflection."""
-    n = origins.shape[0]
-    for i in numba.prange(n):
-        survive[i] = False
-        for c in range(3):
-            absorbed[i, c] = 0.0
-            escaped[i, c] = 0.0
-            truncated[i, c] = 0.0
-        if prim[i] < 0:
+@jit
+def _bounce(s, e, prim, ng, o, d, f, length, rng, hit_pos, hit_dir, hit_flux, hit_nrm, hit_tri, nh,
+            material_of, materials, bounce, max_bounces, centre, escape_radius, eps, sums):
+    """Rays s … e−1 of one stream's log after Embree: segment lengths (Embree wrote the hit
+    distances into `length`), hit records from `nh` on, and the Russian-roulette diffuse
+    reflection, whose survivors are appended to the log from e on, with their random states.
+    `materials` rows are (albedo RGB, survival probability q, albedo / q); `sums` rows gain the
+    absorbed, escaped and truncated flux. Returns (end of the log, hit count, segments of
+    positive length)."""
+    w = e
+    kept = 0
+    r2 = escape_radius * escape_radius
+    ab0 = ab1 = ab2 = es0 = es1 = es2 = tr0 = tr1 = tr2 = 0.0
+    for i in range(s, e):
+        j = i - s
+        ox, oy, oz = np.float64(o[i, 0]), np.float64(o[i, 1]), np.float64(o[i, 2])
+        dx, dy, dz = np.float64(d[i, 0]), np.float64(d[i, 1]), np.float64(d[i, 2])
+        f0, f1, f2 = np.float64(f[i, 0]), np.float64(f[i, 1]), np.float64(f[i, 2])
+        t = prim[j]
+        if t < 0:
             # Escapes: the segment runs to the far side of a sphere around the scene.
-            b = 0.0
-            cc = 0.0
-            for c in range(3):
-                d = origins[i, c] - centre[c]
-                b += dirs[i, c] * d
-                cc += d * d
-            disc = b * b - (cc - escape_radius * escape_radius)
-            t = -b + np.sqrt(disc) if disc > 0.0 else 0.0
-            seg_length[i] = t if t > 0.0 else 0.0
-            for c in range(3):
-                escaped[i, c] = flux[i, c]
+            cx, cy, cz = ox - centre[0], oy - centre[1], oz - centre[2]
+            b = dx * cx + dy * cy + dz * cz
+            disc = b * b - (cx * cx + cy * cy + cz * cz - r2)
+            te = -b + np.sqrt(disc) if disc > 0.0 else 0.0
+            length[i] = te if te > 0.0 else 0.0
+            kept += length[i] > 0.0
+            es0 += f0
+            es1 += f1
+            es2 += f2
             continue
-        seg_length[i] = tfar[i]
-        nx, ny, nz = ng[i, 0], ng[i, 1], ng[i, 2]
+        tf = np.float64(length[i])
+        kept += tf > 0.0
+        nx, ny, nz = np.float64(ng[j, 0]), np.float64(ng[j, 1]), np.float64(ng[j, 2])
         ln = np.sqrt(nx * nx + ny * ny + nz * nz)
         if ln > 0.0:
-            nx, ny, nz = nx / ln, ny / ln, nz / ln
-        if nx * dirs[i, 0] + ny * dirs[i, 1] + nz * dirs[i, 2] > 0.0:
+            inv = 1.0 / ln
+            nx, ny, nz = nx * inv, ny * inv, nz * inv
+        if nx * dx + ny * dy + nz * dz > 0.0:
             nx, ny, nz = -nx, -ny, -nz
-        hit_normal[i, 0], hit_normal[i, 1], hit_normal[i, 2] = nx, ny, nz
-        for c in range(3):
-            hit_pos[i, c] = origins[i, c] + tfar[i] * dirs[i, c]
-        t = prim[i]
-        a0, a1, a2 = albedo[t, 0], albedo[t, 1], albedo[t, 2]
-        for c in range(3):
-            absorbed[i, c] = flux[i, c] * (1.0 - albedo[t, c])
+        px, py, pz = ox + tf * dx, oy + tf * dy, oz + tf * dz
+        hit_pos[nh, 0], hit_pos[nh, 1], hit_pos[nh, 2] = px, py, pz
+        hit_dir[nh, 0], hit_dir[nh, 1], hit_dir[nh, 2] = d[i, 0], d[i, 1], d[i, 2]
+        hit_flux[nh, 0], hit_flux[nh, 1], hit_flux[nh, 2] = f[i, 0], f[i, 1], f[i, 2]
+        hit_nrm[nh, 0], hit_nrm[nh, 1], hit_nrm[nh, 2] = nx, ny, nz
+        hit_tri[nh] = t
+        nh += 1
+        m = material_of[t]
+        a0, a1, a2 = materials[m, 0], materials[m, 1], materials[m, 2]
+        ab0 += f0 * (1.0 - a0)
+        ab1 += f1 * (1.0 - a1)
+        ab2 += f2 * (1.0 - a2)
         if bounce >= max_bounces:
-            for c in range(3):
-                truncated[i, c] = flux[i, c] * albedo[t, c]
+            tr0 += f0 * a0
+            tr1 += f1 * a1
+            tr2 += f2 * a2
             continue
-        q = max(a0, max(a1, a2))
-        if q > 1.0:
-            q = 1.0
-        if q <= 0.0 or u[i, 0] >= q:
+        state, u0, u1 = uniform2(rng[i])
+        if u0 >= materials[m, 3]:  # absorbed by Russian roulette (always when q = 0)
             continue
-        survive[i] = True
-        for c in range(3):
-            next_flux[i, c] = flux[i, c] * albedo[t, c] / q
+        state, u2, _ = uniform2(state)
         # Cosine-weighted direction about the face normal on the side the photon arrived.
-        r = np.sqrt(u[i, 1])
-        phi = 2.0 * np.pi * u[i, 2]
-        lx, ly, lz = r * np.cos(phi), r * np.sin(phi), np.sqrt(max(0.0, 1.0 - u[i, 1]))
-        sign = 1.0 if nz >= 0.0 else -1.0
-        aa = -1.0 / (sign + nz)
-        bb = nx * ny * aa
-        tx, ty, tz = 1.0 + sign * nx * nx * aa, sign * bb, -sign * nx
-        sx, sy, sz = bb, sign + ny * ny * aa, -ny
-        next_dir[i, 0] = lx * tx + ly * sx + lz * nx
-        next_dir[i, 1] = lx * ty + ly * sy + lz * ny
-        next_dir[i, 2] = lx * tz + ly * sz + lz * nz
-        next_origin[i, 0] = hit_pos[i, 0] + eps * nx
-        next_origin[i, 1] = hit_pos[i, 1] + eps * ny
-        next_origin[i, 2] = hit_pos[i, 2] + eps * nz
+        rx, ry, rz = cosine_hemisphere(nx, ny, nz, u1, u2)
+        o[w, 0], o[w, 1], o[w, 2] = px + eps * nx, py + eps * ny, pz + eps * nz
+        d[w, 0], d[w, 1], d[w, 2] = rx, ry, rz
+        f[w, 0], f[w, 1], f[w, 2] = f0 * materials[m, 4], f1 * materials[m, 5], f2 * materials[m, 6]
+        length[w] = RAY_FAR
+        rng[w] = state
+        w += 1
+    sums[0, 0] += ab0
+    sums[0, 1] += ab1
+    sums[0, 2] += ab2
+    sums[1, 0] += es0
+    sums[1, 1] += es1
+    sums[1, 2] += es2
+    sums[2, 0] += tr0
+    sums[2, 1] += tr1
+    sums[2, 2] += tr2
+    return w, nh, kept
+
+
+def material_table(albedo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-triangle index into a table of the distinct materials, rows (albedo RGB clipped to
+    [0, 1], Russian-roulette survival probability q = max(albedo), albedo / q): a small table
+    stays in cache where per-triangle rows would not."""
+    a = np.clip(np.asarray(albedo, np.float64).reshape(-1, 3), 0.0, 1.0)
+    if len(a) == 0:
+        return np.zeros(0, np.int32), np.zeros((1, 7))
+    table, index = np.unique(a, axis=0, return_inverse=True)
+    q = table.max(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        carried = np.where(q[:, None] > 0.0, table / q[:, None], 0.0)
+    dtype = np.uint16 if len(table) <= 65536 else np.int32
+    return (np.ascontiguousarray(index.reshape(-1), dtype),
+            np.ascontiguousarray(np.column_stack([table, q, carried])))
+
+
+class _Stream:
+    """Photons traced together by one thread: the log of their rays (every bounce in order; they
+    become the segments) and their hits, laid out as the batch's records, in buffers that grow as
+    needed and are reused from stream to stream (and from bake to bake: see `_FREE`)."""
+
+    def __init__(self):
+        self.rays = self.hits = self.kept = 0
+        self.sums = np.zeros((3, 3))
+        self.embree_seconds = 0.0
+        self._alloc(0, 0)
+
+    def _alloc(self, rays: int, hits: int):
+        vec = lambda n: np.empty((n, 3), np.float32)
+        self.o, self.d, self.f = vec(rays), vec(rays), vec(rays)
+        self.length = np.empty(rays, np.float32)
+        self.rng = np.empty(rays, np.uint64)
+        self.hit_pos, self.hit_dir, self.hit_flux, self.hit_nrm = vec(hits), vec(hits), vec(hits), vec(hits)
+        self.hit_tri = np.empty(hits, np.int32)
+
+    def _arrays(self):
+        return (self.o, self.d, self.f, self.length, self.rng, self.hit_pos, self.hit_dir, self.hit_flux,
+                self.hit_nrm, self.hit_tri)
+
+    def reserve(self, rays: int, hits: int):
+        """Room for `rays` rays and `hits` hits, keeping what is logged so far."""
+        if rays <= len(self.length) and hits <= len(self.hit_tri):
+            return
+        old = self._arrays()
+        self._alloc(max(rays, len(self.length) * 3 // 2), max(hits, len(self.hit_tri) * 3 // 2))
+        for a, b, n in zip(old, self._arrays(), [self.rays] * 5 + [self.hits] * 5):
+            b[:n] = a[:n]
+
+    def copy_to(self, seg: list[np.ndarray], seg_at: int, hit: list[np.ndarray], hit_at: int) -> None:
+        """This stream's segments of positive length into rows `seg_at` … of a batch's segment
+        arrays (origin, direction, length, flux), its hits into rows `hit_at` … of its hit arrays.
+        numpy's block copies (memcpy) beat compiled loops several times here."""
+        n, nh = self.rays, self.hits
+        src = self.o[:n], self.d[:n], self.length[:n], self.f[:n]
+        if self.kept < n:  # some segment of zero length: none in a closed scene
+            keep = self.length[:n] > 0.0
+            src = tuple(a[keep] for a in src)
+        for dst, a in zip(seg, src):
+            dst[seg_at:seg_at + self.kept] = a
+        for dst, a in zip(hit, (self.hit_pos, self.hit_dir, self.hit_flux, self.hit_nrm, self.hit_tri)):
+            dst[hit_at:hit_at + nh] = a[:nh]
+
+
+# Stream buffers not in use, shared by all tracers (list.pop and append are atomic): a few
+# megabytes each, kept from bake to bake, at most _KEEP of them.
+_FREE: list[_Stream] = []
+_KEEP = 8
+
+
+def _release(st: _Stream) -> None:
+    if len(_FREE) < _KEEP:
+        _FREE.append(st)
+
+
+class _ArrayPool:
+    """Record arrays for batches, handed out as views and reused once no view of them is left.
+
+    A view holds a reference to the array it views, as does every array derived from one without
+    a copy, so an array whose reference count is back at its count when idle has no users and its
+    memory can take a later batch's records. Fresh memory is slow to touch; this memory is not."""
+
+    KEEP = 3  # sets kept for reuse
+
+    def __init__(self, *spec):
+        self.spec = spec  # (shape of a row, dtype) per array
+        self.sets: list[list[np.ndarray]] = []
+        self._idle = None
+
+    @staticmethod
+    def _refs(arrays) -> list[int]:
+        return [sys.getrefcount(a) for a in arrays]
+
+    def take(self, rows: int) -> list[np.ndarray]:
+        """A set of arrays of at least `rows` rows that nothing else uses."""
+        idle = [arrays for arrays in self.sets if self._refs(arrays) == self._idle]
+        for arrays in idle:
+            if len(arrays[0]) >= rows:
+                return arrays
+        self.sets = [arrays for arrays in self.sets if not any(arrays is a for a in idle)]  # all too small
+        arrays = [np.empty((rows * 9 // 8,) + row, dtype) for row, dtype in self.spec]
+        self._idle = self._refs(arrays)
+        self.sets.append(arrays)
+        if len(self.sets) > self.KEEP:
+            self.sets.pop(0)  # in use: it is freed when its last view goes
+        return arrays
+
+    def grow(self, arrays: list[np.ndarray], rows: int, used: int) -> None:
+        """Replace a set's arrays by larger ones (keeping the first `used` rows), in place."""
+        for k, (a, (row, dtype)) in enumerate(zip(list(arrays), self.spec)):
+            arrays[k] = np.empty((rows,) + row, dtype)
+            arrays[k][:used] = a[:used]
+
+
+class _Records:
+    """A batch's record arrays, taken from the tracer's pools for an estimate of their size.
+
+    Streams are placed in stream order: when a stream is traced, the thread that traced it copies
+    it in — while it is still in that core's cache — if every earlier stream is placed, and then
+    any later streams that were waiting for it. Streams that do not fit wait for `close`, which
+    grows the arrays once no thread is copying."""
+
+    def __init__(self, seg_pool: _ArrayPool, hit_pool: _ArrayPool, segments: int, hits: int, streams: int):
+        self.pools = seg_pool, hit_pool
+        self.seg, self.hit = seg_pool.take(segments), hit_pool.take(hits)
+        self.segments = self.hits = 0  # rows placed
+        self.waiting: list[Optional[_Stream]] = [None] * streams
+        self.placed = 0  # streams placed
+        self.full = False
+        self.stats: list = [None] * streams
+        self._lock = threading.Lock()
+
+    def _copy(self, st: _Stream, seg_at: int, hit_at: int):
+        st.copy_to(self.seg, seg_at, self.hit, hit_at)
+        _release(st)
+
+    def add(self, index: int, st: _Stream):
+        """Stream `index` is traced (called from the thread that traced it)."""
+        self.stats[index] = (st.rays, st.sums.copy(), st.embree_seconds)
+        jobs = []
+        with self._lock:
+            self.waiting[index] = st
+            while not self.full and self.placed < len(self.waiting) and self.waiting[self.placed] is not None:
+                nxt = self.waiting[self.placed]
+                if self.segments + nxt.kept > len(self.seg[0]) or self.hits + nxt.hits > len(self.hit[0]):
+                    self.full = True
+                    break
+                jobs.append((nxt, self.segments, self.hits))
+                self.segments += nxt.kept
+                self.hits += nxt.hits
+                self.waiting[self.placed] = None
+                self.placed += 1
+        for job in jobs:
+            self._copy(*job)
+
+    def close(self, photons: int) -> PhotonBatch:
+        """Every stream added and copied: place what did not fit, and hand out the batch."""
+        rest = [st for st in self.waiting[self.placed:] if st is not None]
+        for pool, arrays, used, more in zip(self.pools, (self.seg, self.hit), (self.segments, self.hits),
+                                            (sum(st.kept for st in rest), sum(st.hits for st in rest))):
+            if used + more > len(arrays[0]):
+                pool.grow(arrays, used + more, used)
+        for st in rest:
+            self._copy(st, self.segments, self.hits)
+            self.segments += st.kept
+            self.hits += st.hits
+        return PhotonBatch(photons, *(a[:self.segments] for a in self.seg), *(a[:self.hits] for a in self.hit))
 
 
 class PhotonTracer:
-    """Traces `photons` photons in batches; iterate `batches()` to stream the records."""
+    """Traces `photons` photons in batches; iterate `batches()` to stream the records.
+
+    A batch is cut into streams of photons (sizes fixed by the batch size alone), which worker
+    threads trace through all their bounces independently: emission, then per bounce Embree on
+    the stream's current rays and one compiled pass for their records and reflections. Finished
+    streams are copied into the batch's record arrays in stream order (`_Records`)."""
+
+    MAX_STREAM = 16384
+    MIN_STREAM = 1024
 
     def __init__(self, scene: Scene, photons: int, bounces: int, seed: int = 0,
                  batch_size: int = 200_000, threads: int = 0):
@@ -182,9 +361,18 @@ class PhotonTracer:
         self.centre, radius = scene.bounds()
         self.escape_radius = 1.1 * radius
         self.eps = max(1e-5 * radius, 1e-6)
-        self.albedo = np.clip(np.asarray(scene.albedo, np.float64), 0.0, 1.0)
+        self.material_of, self.materials = material_table(scene.albedo)
         self.stats = TraceStats(emitted=self.schedule.emitted_flux.copy())
         self._caster: Optional[RayCaster] = None
+        self._pool: Optional[ThreadPoolExecutor] = None
+        vec, row = ((3,), np.float32), ((), np.float32)
+        self._seg_arrays = _ArrayPool(vec, vec, row, vec)
+        self._hit_arrays = _ArrayPool(vec, vec, vec, vec, ((), np.int32))
+        # Records per photon, for the first batch's arrays: paths in a closed scene of the mean
+        # survival probability, with a margin; later batches go by what earlier ones made.
+        q = float(np.mean(self.materials[self.material_of, 3])) if len(self.material_of) else 0.0
+        self._per_photon = 1.25 * sum(min(q, 0.95) ** b for b in range(min(self.bounces, 200) + 1))
+        self._per_photon_hits = self._per_photon
 
     @property
     def photons(self) -> int:
@@ -194,9 +382,22 @@ class PhotonTracer:
     def batch_count(self) -> int:
         return -(-self.photons // self.batch_size)
 
+    @classmethod
+    def stream_bounds(cls, n: int) -> list[tuple[int, int]]:
+        """Streams of a batch of n photons: MAX_STREAM photons, then a quarter of what is left
+        (at least MIN_STREAM), so the last streams are short and the threads finish together."""
+        out, a = [], 0
+        while a < n:
+            size = min(n - a, max(cls.MIN_STREAM, min(cls.MAX_STREAM, (n - a) // 4)))
+            out.append((a, a + size))
+            a += size
+        return out
+
     def batches(self, cancel: Optional[Callable[[], bool]] = None) -> Iterator[PhotonBatch]:
         if self._caster is None:
-            self._caster = RayCaster(self.scene.positions, self.threads)
+            self._caster = RayCaster(self.scene.positions)
+        if self.threads > 1:
+            self._pool = ThreadPoolExecutor(self.threads)
         try:
             for index in range(self.batch_count):
                 if cancel is not None and cancel():
@@ -204,60 +405,70 @@ class PhotonTracer:
                 t0 = time.perf_counter()
                 a = index * self.batch_size
                 b = min(self.photons, a + self.batch_size)
-                batch = self._trace_batch(index, a, b)
+                batch = self._trace_batch(a, b)
                 self.stats.seconds += time.perf_counter() - t0
                 yield batch
         finally:
-            self._caster.close()
+            if self._pool is not None:
+                self._pool.shutdown(cancel_futures=True)
+                self._pool = None
             self._caster = None
+            self._seg_arrays.sets.clear()
+            self._hit_arrays.sets.clear()
 
-    def _trace_batch(self, index: int, start: int, stop: int) -> PhotonBatch:
-        origins, dirs, flux = self.schedule.batch(index, start, stop)
-        rng = np.random.default_rng([self.schedule.seed, index, 1])
-        segs, hits = [], []
-        st = self.stats
-        st.photons += stop - start
-        bounce = 0
-        while len(origins):
+    def _trace_stream(self, records: _Records, index: int, start: int, stop: int) -> None:
+        """Photons [start, stop) of the bake through all their bounces, in a free stream buffer,
+        then into the batch's records."""
+        try:
+            st = _FREE.pop()
+        except IndexError:
+            st = _Stream()
+        n = stop - start
+        st.rays = st.hits = st.kept = 0
+        st.sums[:] = 0.0
+        st.embree_seconds = 0.0
+        st.reserve(2 * n, n)
+        self.schedule.emit(start, stop, st.o, st.d, st.f, st.rng)
+        st.length[:n] = RAY_FAR
+        s, e, bounce = 0, n, 0
+        st.rays = n
+        while e > s:
+            st.reserve(e + (e - s), st.hits + (e - s))
             t0 = time.perf_counter()
-            tfar, prim, ng = self._caster.intersect(origins, dirs)
+            _, prim, ng = self._caster.intersect(st.o[s:e], st.d[s:e], st.length[s:e])
             st.embree_seconds += time.perf_counter() - t0
-            st.rays += len(origins)
-            n = len(origins)
-            u = rng.random((n, 3))
-            seg_length = np.empty(n, np.float64)
-            hit_pos = np.empty((n, 3), np.float64)
-            hit_normal = np.empty((n, 3), np.float64)
-            next_origin = np.empty((n, 3), np.float64)
-            next_dir = np.empty((n, 3), np.float64)
-            next_flux = np.empty((n, 3), np.float64)
-            survive = np.empty(n, np.bool_)
-            absorbed = np.empty((n, 3), np.float64)
-            escaped = np.empty((n, 3), np.float64)
-            truncated = np.empty((n, 3), np.float64)
-            origins64 = np.asarray(origins, np.float64)
-            dirs64 = np.asarray(dirs, np.float64)
-            flux64 = np.asarray(flux, np.float64)
-            _scatter(origins64, dirs64, flux64, tfar, prim, ng, self.albedo, bounce, self.bounces, u,
-                     self.centre, self.escape_radius, self.eps, seg_length, hit_pos, hit_normal,
-                     next_origin, next_dir, next_flux, survive, absorbed, escaped, truncated)
-            st.absorbed += absorbed.sum(axis=0)
-            st.escaped += escaped.sum(axis=0)
-            st.truncated += truncated.sum(axis=0)
-            keep = seg_length > 0.0
-            segs.append((origins64[keep], dirs64[keep], seg_length[keep], flux64[keep]))
-            hit = prim >= 0
-            hits.append((hit_pos[hit], dirs64[hit], flux64[hit], hit_normal[hit], prim[hit]))
-            origins, dirs, flux = next_origin[survive], next_dir[survive], next_flux[survive]
+            w, st.hits, kept = _bounce(s, e, prim, ng, st.o, st.d, st.f, st.length, st.rng, st.hit_pos,
+                                       st.hit_dir, st.hit_flux, st.hit_nrm, st.hit_tri, st.hits,
+                                       self.material_of, self.materials, bounce, self.bounces, self.centre,
+                                       self.escape_radius, self.eps, st.sums)
+            st.kept += kept
+            s, e, st.rays = e, w, w
             bounce += 1
-        f32 = lambda parts, k: np.ascontiguousarray(np.concatenate([p[k] for p in parts]), np.float32)
-        batch = PhotonBatch(
-            photons=stop - start,
-            seg_origin=f32(segs, 0), seg_dir=f32(segs, 1), seg_length=f32(segs, 2), seg_flux=f32(segs, 3),
-            hit_position=f32(hits, 0), hit_dir=f32(hits, 1), hit_flux=f32(hits, 2),
-            hit_normal=f32(hits, 3),
-            hit_triangle=np.concatenate([h[4] for h in hits]).astype(np.int32),
-        )
-        st.segments += batch.segment_count
-        st.hits += batch.hit_count
+        records.add(index, st)
+
+    def _trace_batch(self, start: int, stop: int) -> PhotonBatch:
+        n = stop - start
+        bounds = self.stream_bounds(n)
+        records = _Records(self._seg_arrays, self._hit_arrays, int(n * self._per_photon) + 1024,
+                           int(n * self._per_photon_hits) + 1024, len(bounds))
+        jobs = [(records, k, start + a, start + b) for k, (a, b) in enumerate(bounds)]
+        if self._pool is None:
+            for job in jobs:
+                self._trace_stream(*job)
+        else:
+            for j in [self._pool.submit(self._trace_stream, *job) for job in jobs]:
+                j.result()
+        batch = records.close(n)
+        tr = self.stats
+        for rays, sums, embree in records.stats:  # in stream order: the sums do not depend on timing
+            tr.rays += rays
+            tr.absorbed += sums[0]
+            tr.escaped += sums[1]
+            tr.truncated += sums[2]
+            tr.embree_seconds += embree
+        tr.photons += n
+        tr.segments += batch.segment_count
+        tr.hits += batch.hit_count
+        self._per_photon = 1.05 * batch.segment_count / n + 0.01
+        self._per_photon_hits = 1.05 * batch.hit_count / n + 0.01
         return batch
