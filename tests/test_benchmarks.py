@@ -54,3 +54,10 @@ def test_quality_benchmark(tmp_path):
     assert all(0 < r["rmse"] < 2 for r in res["rows"])
     # The reference is cached: a second run does not bake it again.
     assert list((tmp_path / "cache").glob("cornell_box-*.npz"))
+
+
+def test_disc_index_embree_benchmark(tmp_path):
+    out = tmp_path / "embree.json"
+    _run("disc_index_embree.py", "--quick", "--case", "room", "--repeat", "1", "--no-staggered",
+         "--json", str(out))
+    assert out.exists() and out.stat().st_size > 0
