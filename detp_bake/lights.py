@@ -13,8 +13,8 @@ from typing import Callable
 import numpy as np
 
 from . import sampling
-from .sampling import (cosine_hemisphere, inline, jit, orthonormal_basis, photon_rng, uniform2, uniform_cone,
-                       uniform_disc, uniform_sphere, uniform_triangle)
+from .sampling import (cone_lobe, cosine_hemisphere, cosine_lobe, in_frame, inline, jit, orthonormal_basis,
+                       photon_rng, uniform2, uniform_disc, uniform_sphere, uniform_triangle)
 from .errors import BakeError
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
 
@@ -77,11 +77,44 @@ def _spot_solid_angle(spot_size: float, blend: float) -> float:
         float(2.0 * np.pi * np.trapz(att, c))
 
 
+def _frame(axis: np.ndarray) -> tuple:
+    """(tangent, tangent, unit axis), each an (x, y, z) tuple: a constant frame for a kernel."""
+    n = np.asarray(axis, np.float64) / np.linalg.norm(axis)
+    sign = 1.0 if n[2] >= 0.0 else -1.0  # as in sampling.orthonormal_basis
+    a = -1.0 / (sign + n[2])
+    b = n[0] * n[1] * a
+    t = (1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0])
+    s = (b, sign + n[1] * n[1] * a, -n[1])
+    return tuple(map(float, t)), tuple(map(float, s)), tuple(map(float, n))
+
+
+BLOCK = 256  # photons computed together: columns of a block vectorise, rows of (N, 3) arrays do not
+
+
 @inline
-def _put(a, i, x, y, z):
-    a[i, 0] = x
-    a[i, 1] = y
-    a[i, 2] = z
+def _block():
+    """Scratch for one block: rows origin xyz, direction xyz, flux RGB; and random states."""
+    return np.empty((9, BLOCK)), np.empty(BLOCK, np.uint64)
+
+
+@inline
+def _set(buf, row, k, x, y, z):
+    buf[row, k] = x
+    buf[row + 1, k] = y
+    buf[row + 2, k] = z
+
+
+@inline
+def _flush(buf, state, a, b, o, d, f, rng):
+    """Block rows a … b−1 into the (N, 3) outputs (and the states into `rng` unless empty)."""
+    for i in range(a, b):
+        k = i - a
+        for c in range(3):
+            o[i, c] = buf[c, k]
+            d[i, c] = buf[3 + c, k]
+            f[i, c] = buf[6 + c, k]
+    if rng.shape[0] > 0:
+        rng[a:b] = state[:b - a]
 
 
 @inline
@@ -93,26 +126,25 @@ def _draw4(key, photon_id):
     return r, u0, u1, u2, u3
 
 
-@inline
-def _keep(rng, i, r):
-    if rng.shape[0] > 0:
-        rng[i] = r
-
-
 @jit
 def _emit_point(key, first, n, pos, radius, flux, o, d, f, rng):
-    for i in range(n):
-        r, u0, u1, u2, u3 = _draw4(key, first + i)
-        nx, ny, nz = uniform_sphere(u0, u1)
-        if radius > 0.0:
-            _put(o, i, pos[0] + radius * nx, pos[1] + radius * ny, pos[2] + radius * nz)
-            dx, dy, dz = cosine_hemisphere(nx, ny, nz, u2, u3)
-            _put(d, i, dx, dy, dz)
-        else:
-            _put(o, i, pos[0], pos[1], pos[2])
-            _put(d, i, nx, ny, nz)
-        _put(f, i, flux[0], flux[1], flux[2])
-        _keep(rng, i, r)
+    buf, state = _block()
+    for a in range(0, n, BLOCK):
+        b = min(n, a + BLOCK)
+        for i in range(a, b):
+            k = i - a
+            r, u0, u1, u2, u3 = _draw4(key, first + i)
+            nx, ny, nz = uniform_sphere(u0, u1)
+            if radius > 0.0:
+                _set(buf, 0, k, pos[0] + radius * nx, pos[1] + radius * ny, pos[2] + radius * nz)
+                dx, dy, dz = cosine_hemisphere(nx, ny, nz, u2, u3)
+                _set(buf, 3, k, dx, dy, dz)
+            else:
+                _set(buf, 0, k, pos[0], pos[1], pos[2])
+                _set(buf, 3, k, nx, ny, nz)
+            _set(buf, 6, k, flux[0], flux[1], flux[2])
+            state[k] = r
+        _flush(buf, state, a, b, o, d, f, rng)
 
 
 def point_emitter(light: PointLight) -> Emitter:
@@ -126,15 +158,22 @@ def point_emitter(light: PointLight) -> Emitter:
 
 
 @jit
-def _emit_spot(key, first, n, pos, axis, cos_half, smooth, scale, o, d, f, rng):
-    for i in range(n):
-        r, u0, u1, u2, u3 = _draw4(key, first + i)
-        dx, dy, dz = uniform_cone(axis[0], axis[1], axis[2], cos_half, u0, u1)
-        att = _spot_att(dx * axis[0] + dy * axis[1] + dz * axis[2], cos_half, smooth)
-        _put(o, i, pos[0], pos[1], pos[2])
-        _put(d, i, dx, dy, dz)
-        _put(f, i, scale[0] * att, scale[1] * att, scale[2] * att)
-        _keep(rng, i, r)
+def _emit_spot(key, first, n, pos, frame, cos_half, smooth, scale, o, d, f, rng):
+    t, s, axis = frame
+    buf, state = _block()
+    for a in range(0, n, BLOCK):
+        b = min(n, a + BLOCK)
+        for i in range(a, b):
+            k = i - a
+            r, u0, u1, u2, u3 = _draw4(key, first + i)
+            lx, ly, lz = cone_lobe(cos_half, u0, u1)
+            dx, dy, dz = in_frame(lx, ly, lz, t, s, axis)
+            att = _spot_att(lz, cos_half, smooth)
+            _set(buf, 0, k, pos[0], pos[1], pos[2])
+            _set(buf, 3, k, dx, dy, dz)
+            _set(buf, 6, k, scale[0] * att, scale[1] * att, scale[2] * att)
+            state[k] = r
+        _flush(buf, state, a, b, o, d, f, rng)
 
 
 def spot_emitter(light: SpotLight) -> Emitter:
@@ -147,35 +186,42 @@ def spot_emitter(light: SpotLight) -> Emitter:
     cone = 2.0 * np.pi * (1.0 - cos_half)
     flux = power / (4.0 * np.pi) * _spot_solid_angle(spot_size, light.blend)
     smooth = (1.0 - cos_half) * light.blend
+    frame = _frame(axis)
 
     def emit(key, first, n, total, o, d, f, rng):
         scale = power / (4.0 * np.pi) * cone / total
-        _emit_spot(key, first, n, pos, axis, cos_half, smooth, scale, o, d, f, rng)
+        _emit_spot(key, first, n, pos, frame, cos_half, smooth, scale, o, d, f, rng)
 
     return Emitter(light.name, flux, emit)
 
 
 @jit
-def _emit_parallel(key, first, n, axis, cos_max, centre, radius, flux, o, d, f, rng):
-    """Sun (axis given, cos_max < 1 for a disc of directions) or world (no axis: any direction).
-    Photons start on a disc of the scene's bounding radius perpendicular to their own direction,
-    2 radii out, which keeps the irradiance uniform."""
-    for i in range(n):
-        r, u0, u1, u2, u3 = _draw4(key, first + i)
-        if axis.shape[0] == 0:
-            dx, dy, dz = uniform_sphere(u2, u3)
-        elif cos_max < 1.0:
-            dx, dy, dz = uniform_cone(axis[0], axis[1], axis[2], cos_max, u2, u3)
-        else:
-            dx, dy, dz = axis[0], axis[1], axis[2]
-        px, py = uniform_disc(u0, u1)
-        t, s = orthonormal_basis(dx, dy, dz)
-        _put(o, i, centre[0] + radius * (px * t[0] + py * s[0]) - 2.0 * radius * dx,
-             centre[1] + radius * (px * t[1] + py * s[1]) - 2.0 * radius * dy,
-             centre[2] + radius * (px * t[2] + py * s[2]) - 2.0 * radius * dz)
-        _put(d, i, dx, dy, dz)
-        _put(f, i, flux[0], flux[1], flux[2])
-        _keep(rng, i, r)
+def _emit_parallel(key, first, n, frame, cos_max, centre, radius, flux, o, d, f, rng):
+    """Sun (cos_max ≤ 1: directions within acos(cos_max) of the frame's axis) or world (cos_max
+    < −1: any direction). Photons start on a disc of the scene's bounding radius perpendicular to
+    their own direction, 2 radii out, which keeps the irradiance uniform."""
+    buf, state = _block()
+    for a in range(0, n, BLOCK):
+        b = min(n, a + BLOCK)
+        for i in range(a, b):
+            k = i - a
+            r, u0, u1, u2, u3 = _draw4(key, first + i)
+            if cos_max < -1.0:
+                dx, dy, dz = uniform_sphere(u2, u3)
+            elif cos_max < 1.0:
+                lx, ly, lz = cone_lobe(cos_max, u2, u3)
+                dx, dy, dz = in_frame(lx, ly, lz, frame[0], frame[1], frame[2])
+            else:
+                dx, dy, dz = frame[2]
+            px, py = uniform_disc(u0, u1)
+            t, s = orthonormal_basis(dx, dy, dz)
+            _set(buf, 0, k, centre[0] + radius * (px * t[0] + py * s[0]) - 2.0 * radius * dx,
+                 centre[1] + radius * (px * t[1] + py * s[1]) - 2.0 * radius * dy,
+                 centre[2] + radius * (px * t[2] + py * s[2]) - 2.0 * radius * dz)
+            _set(buf, 3, k, dx, dy, dz)
+            _set(buf, 6, k, flux[0], flux[1], flux[2])
+            state[k] = r
+        _flush(buf, state, a, b, o, d, f, rng)
 
 
 def sun_emitter(light: SunLight, centre: np.ndarray, radius: float) -> Emitter:
@@ -186,35 +232,46 @@ def sun_emitter(light: SunLight, centre: np.ndarray, radius: float) -> Emitter:
     flux = e * np.pi * radius ** 2
     cos_max = float(np.cos(0.5 * light.angle)) if light.angle > 0.0 else 1.0
     centre = np.asarray(centre, np.float64)
+    frame = _frame(axis)
 
     def emit(key, first, n, total, o, d, f, rng):
-        _emit_parallel(key, first, n, axis, cos_max, centre, float(radius), flux / total, o, d, f, rng)
+        _emit_parallel(key, first, n, frame, cos_max, centre, float(radius), flux / total, o, d, f, rng)
 
     return Emitter(light.name, flux, emit)
 
 
 @jit
-def _emit_area(key, first, n, m, normal, disc, sx, sy, flux, o, d, f, rng):
-    for i in range(n):
-        r, u0, u1, u2, u3 = _draw4(key, first + i)
-        if disc:
-            px, py = uniform_disc(u0, u1)
-            lx, ly = 0.5 * sx * px, 0.5 * sy * py
-        else:
-            lx, ly = (u0 - 0.5) * sx, (u1 - 0.5) * sy
-        _put(o, i, m[0, 0] * lx + m[0, 1] * ly + m[0, 3], m[1, 0] * lx + m[1, 1] * ly + m[1, 3],
-             m[2, 0] * lx + m[2, 1] * ly + m[2, 3])
-        dx, dy, dz = cosine_hemisphere(normal[0], normal[1], normal[2], u2, u3)
-        _put(d, i, dx, dy, dz)
-        _put(f, i, flux[0], flux[1], flux[2])
-        _keep(rng, i, r)
+def _emit_area(key, first, n, m, frame, disc, sx, sy, flux, o, d, f, rng):
+    t, s, normal = frame
+    buf, state = _block()
+    for a in range(0, n, BLOCK):
+        b = min(n, a + BLOCK)
+        for i in range(a, b):
+            k = i - a
+            r, u0, u1, u2, u3 = _draw4(key, first + i)
+            if disc:
+                px, py = uniform_disc(u0, u1)
+                lx, ly = 0.5 * sx * px, 0.5 * sy * py
+            else:
+                lx, ly = (u0 - 0.5) * sx, (u1 - 0.5) * sy
+            _set(buf, 0, k, m[0, 0] * lx + m[0, 1] * ly + m[0, 3], m[1, 0] * lx + m[1, 1] * ly + m[1, 3],
+                 m[2, 0] * lx + m[2, 1] * ly + m[2, 3])
+            lx, ly, lz = cosine_lobe(u2, u3)
+            dx, dy, dz = in_frame(lx, ly, lz, t, s, normal)
+            _set(buf, 3, k, dx, dy, dz)
+            _set(buf, 6, k, flux[0], flux[1], flux[2])
+            state[k] = r
+        _flush(buf, state, a, b, o, d, f, rng)
 
 
 def area_emitter(light: AreaLight) -> Emitter:
     power = np.asarray(light.power, np.float64)
     m = np.ascontiguousarray(light.matrix, np.float64)
-    # Normals transform with the inverse transpose; the light faces local -Z.
-    normal = np.linalg.inv(m[:3, :3]).T @ np.array([0.0, 0.0, -1.0])
+    # Normals transform with the inverse transpose, and inv(A)ᵀ·ẑ = (x × y) / det A for the
+    # columns x, y of A (no LAPACK call, which would wake OpenBLAS threads that then spin for a
+    # tenth of a second); the light faces local -Z.
+    xy = np.cross(m[:3, 0], m[:3, 1])
+    normal = -xy * np.sign(np.sum(xy * m[:3, 2]))  # det A = (x × y) · z
     normal /= np.linalg.norm(normal)
     shape = light.shape.upper()
     if shape not in ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE"):
@@ -222,9 +279,10 @@ def area_emitter(light: AreaLight) -> Emitter:
     sx = float(light.size_x)
     sy = float(light.size_x if shape in ("SQUARE", "DISK") else light.size_y)
     disc = shape in ("DISK", "ELLIPSE")
+    frame = _frame(normal)
 
     def emit(key, first, n, total, o, d, f, rng):
-        _emit_area(key, first, n, m, normal, disc, sx, sy, power / total, o, d, f, rng)
+        _emit_area(key, first, n, m, frame, disc, sx, sy, power / total, o, d, f, rng)
 
     return Emitter(light.name, power, emit)
 
@@ -233,26 +291,31 @@ def area_emitter(light: AreaLight) -> Emitter:
 def _emit_mesh(key, first, n, cdf, p, normal, tri_flux, offset, o, d, f, rng):
     """tri_flux: each triangle's RGB flux over its probability and over total_count."""
     last = cdf.shape[0] - 1
-    for i in range(n):
-        r, u0, u1, u2, u3 = _draw4(key, first + i)
-        r, u4, u5 = uniform2(r)
-        lo, hi = 0, last  # the first triangle whose cdf exceeds u0
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if cdf[mid] <= u0:
-                lo = mid + 1
-            else:
-                hi = mid
-        b0, b1, b2 = uniform_triangle(u1, u2)
-        side = 1.0 if u5 < 0.5 else -1.0
-        nx, ny, nz = side * normal[lo, 0], side * normal[lo, 1], side * normal[lo, 2]
-        _put(o, i, b0 * p[lo, 0, 0] + b1 * p[lo, 1, 0] + b2 * p[lo, 2, 0] + offset * nx,
-             b0 * p[lo, 0, 1] + b1 * p[lo, 1, 1] + b2 * p[lo, 2, 1] + offset * ny,
-             b0 * p[lo, 0, 2] + b1 * p[lo, 1, 2] + b2 * p[lo, 2, 2] + offset * nz)
-        dx, dy, dz = cosine_hemisphere(nx, ny, nz, u3, u4)
-        _put(d, i, dx, dy, dz)
-        _put(f, i, tri_flux[lo, 0], tri_flux[lo, 1], tri_flux[lo, 2])
-        _keep(rng, i, r)
+    buf, state = _block()
+    for a in range(0, n, BLOCK):
+        b = min(n, a + BLOCK)
+        for i in range(a, b):
+            k = i - a
+            r, u0, u1, u2, u3 = _draw4(key, first + i)
+            r, u4, u5 = uniform2(r)
+            lo, hi = 0, last  # the first triangle whose cdf exceeds u0
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if cdf[mid] <= u0:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            b0, b1, b2 = uniform_triangle(u1, u2)
+            side = 1.0 if u5 < 0.5 else -1.0
+            nx, ny, nz = side * normal[lo, 0], side * normal[lo, 1], side * normal[lo, 2]
+            _set(buf, 0, k, b0 * p[lo, 0, 0] + b1 * p[lo, 1, 0] + b2 * p[lo, 2, 0] + offset * nx,
+                 b0 * p[lo, 0, 1] + b1 * p[lo, 1, 1] + b2 * p[lo, 2, 1] + offset * ny,
+                 b0 * p[lo, 0, 2] + b1 * p[lo, 1, 2] + b2 * p[lo, 2, 2] + offset * nz)
+            dx, dy, dz = cosine_hemisphere(nx, ny, nz, u3, u4)
+            _set(buf, 3, k, dx, dy, dz)
+            _set(buf, 6, k, tri_flux[lo, 0], tri_flux[lo, 1], tri_flux[lo, 2])
+            state[k] = r
+        _flush(buf, state, a, b, o, d, f, rng)
 
 
 def mesh_emitter(scene: Scene, offset: float) -> Emitter | None:
@@ -289,10 +352,10 @@ def world_emitter(radiance: np.ndarray, centre: np.ndarray, radius: float) -> Em
     radiance = np.asarray(radiance, np.float64)
     flux = radiance * 4.0 * np.pi ** 2 * radius ** 2
     centre = np.asarray(centre, np.float64)
-    no_axis = np.zeros(0)
+    frame = _frame(np.array([0.0, 0.0, 1.0]))
 
     def emit(key, first, n, total, o, d, f, rng):
-        _emit_parallel(key, first, n, no_axis, -1.0, centre, float(radius), flux / total, o, d, f, rng)
+        _emit_parallel(key, first, n, frame, -2.0, centre, float(radius), flux / total, o, d, f, rng)
 
     return Emitter("world", flux, emit)
 

@@ -236,14 +236,9 @@ class _Stream:
 
 
 # Stream buffers not in use, shared by all tracers (list.pop and append are atomic): a few
-# megabytes each, kept from bake to bake, at most _KEEP of them.
+# megabytes each, kept from bake to bake, as many as a tracer's threads use at once
+# (release_memory() frees them).
 _FREE: list[_Stream] = []
-_KEEP = 8
-
-
-def _release(st: _Stream) -> None:
-    if len(_FREE) < _KEEP:
-        _FREE.append(st)
 
 
 class _ArrayPool:
@@ -251,14 +246,17 @@ class _ArrayPool:
 
     A view holds a reference to the array it views, as does every array derived from one without
     a copy, so an array whose reference count is back at its count when idle has no users and its
-    memory can take a later batch's records. Fresh memory is slow to touch; this memory is not."""
+    memory can take a later batch's records. Fresh memory is slow to touch (page faults: several
+    milliseconds per batch); this memory is not. The pools are shared by all tracers and keep at
+    most KEEP sets: the batch being filled, the one its consumer still holds, and one spare."""
 
-    KEEP = 3  # sets kept for reuse
+    KEEP = 3
 
     def __init__(self, *spec):
         self.spec = spec  # (shape of a row, dtype) per array
         self.sets: list[list[np.ndarray]] = []
         self._idle = None
+        self.lock = threading.Lock()
 
     @staticmethod
     def _refs(arrays) -> list[int]:
@@ -266,6 +264,10 @@ class _ArrayPool:
 
     def take(self, rows: int) -> list[np.ndarray]:
         """A set of arrays of at least `rows` rows that nothing else uses."""
+        with self.lock:
+            return self._take(rows)
+
+    def _take(self, rows: int) -> list[np.ndarray]:
         idle = [arrays for arrays in self.sets if self._refs(arrays) == self._idle]
         for arrays in idle:
             if len(arrays[0]) >= rows:
@@ -278,11 +280,28 @@ class _ArrayPool:
             self.sets.pop(0)  # in use: it is freed when its last view goes
         return arrays
 
+    def clear(self) -> None:
+        """Forget every set (in-use ones are freed when their last view goes)."""
+        with self.lock:
+            self.sets = []
+
     def grow(self, arrays: list[np.ndarray], rows: int, used: int) -> None:
         """Replace a set's arrays by larger ones (keeping the first `used` rows), in place."""
         for k, (a, (row, dtype)) in enumerate(zip(list(arrays), self.spec)):
             arrays[k] = np.empty((rows,) + row, dtype)
             arrays[k][:used] = a[:used]
+
+
+_VEC, _ROW = ((3,), np.float32), ((), np.float32)
+_SEGMENT_ARRAYS = _ArrayPool(_VEC, _VEC, _ROW, _VEC)  # origin, direction, length, flux
+_HIT_ARRAYS = _ArrayPool(_VEC, _VEC, _VEC, _VEC, ((), np.int32))  # position, direction, flux, normal, triangle
+
+
+def release_memory() -> None:
+    """Let go of the buffers kept for later bakes (stream buffers and idle record arrays)."""
+    _FREE.clear()
+    _SEGMENT_ARRAYS.clear()
+    _HIT_ARRAYS.clear()
 
 
 class _Records:
@@ -293,8 +312,10 @@ class _Records:
     any later streams that were waiting for it. Streams that do not fit wait for `close`, which
     grows the arrays once no thread is copying."""
 
-    def __init__(self, seg_pool: _ArrayPool, hit_pool: _ArrayPool, segments: int, hits: int, streams: int):
+    def __init__(self, seg_pool: _ArrayPool, hit_pool: _ArrayPool, segments: int, hits: int, streams: int,
+                 keep: int):
         self.pools = seg_pool, hit_pool
+        self.keep = keep  # stream buffers to keep once copied
         self.seg, self.hit = seg_pool.take(segments), hit_pool.take(hits)
         self.segments = self.hits = 0  # rows placed
         self.waiting: list[Optional[_Stream]] = [None] * streams
@@ -305,7 +326,8 @@ class _Records:
 
     def _copy(self, st: _Stream, seg_at: int, hit_at: int):
         st.copy_to(self.seg, seg_at, self.hit, hit_at)
-        _release(st)
+        if len(_FREE) < self.keep:
+            _FREE.append(st)
 
     def add(self, index: int, st: _Stream):
         """Stream `index` is traced (called from the thread that traced it)."""
@@ -365,9 +387,6 @@ class PhotonTracer:
         self.stats = TraceStats(emitted=self.schedule.emitted_flux.copy())
         self._caster: Optional[RayCaster] = None
         self._pool: Optional[ThreadPoolExecutor] = None
-        vec, row = ((3,), np.float32), ((), np.float32)
-        self._seg_arrays = _ArrayPool(vec, vec, row, vec)
-        self._hit_arrays = _ArrayPool(vec, vec, vec, vec, ((), np.int32))
         # Records per photon, for the first batch's arrays: paths in a closed scene of the mean
         # survival probability, with a margin; later batches go by what earlier ones made.
         q = float(np.mean(self.materials[self.material_of, 3])) if len(self.material_of) else 0.0
@@ -413,8 +432,6 @@ class PhotonTracer:
                 self._pool.shutdown(cancel_futures=True)
                 self._pool = None
             self._caster = None
-            self._seg_arrays.sets.clear()
-            self._hit_arrays.sets.clear()
 
     def _trace_stream(self, records: _Records, index: int, start: int, stop: int) -> None:
         """Photons [start, stop) of the bake through all their bounces, in a free stream buffer,
@@ -449,8 +466,8 @@ class PhotonTracer:
     def _trace_batch(self, start: int, stop: int) -> PhotonBatch:
         n = stop - start
         bounds = self.stream_bounds(n)
-        records = _Records(self._seg_arrays, self._hit_arrays, int(n * self._per_photon) + 1024,
-                           int(n * self._per_photon_hits) + 1024, len(bounds))
+        records = _Records(_SEGMENT_ARRAYS, _HIT_ARRAYS, int(n * self._per_photon) + 1024,
+                           int(n * self._per_photon_hits) + 1024, len(bounds), self.threads + 2)
         jobs = [(records, k, start + a, start + b) for k, (a, b) in enumerate(bounds)]
         if self._pool is None:
             for job in jobs:

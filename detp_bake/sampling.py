@@ -129,20 +129,27 @@ def orthonormal_basis(nx, ny, nz):
 
 
 @inline
-def to_world(lx, ly, lz, nx, ny, nz):
-    """A direction given in a frame whose z axis is the unit normal n, in world space."""
-    t, s = orthonormal_basis(nx, ny, nz)
-    return (lx * t[0] + ly * s[0] + lz * nx,
-            lx * t[1] + ly * s[1] + lz * ny,
-            lx * t[2] + ly * s[2] + lz * nz)
+def in_frame(lx, ly, lz, t, s, n):
+    """A direction given in the frame (tangent t, tangent s, normal n), in world space."""
+    return (lx * t[0] + ly * s[0] + lz * n[0],
+            lx * t[1] + ly * s[1] + lz * n[1],
+            lx * t[2] + ly * s[2] + lz * n[2])
+
+
+@inline
+def cosine_lobe(u1, u2):
+    """Cosine-weighted direction about +z: (x, y, z)."""
+    r = math.sqrt(u1)
+    c, s = sincos_2pi(u2)
+    return r * c, r * s, math.sqrt(max(0.0, 1.0 - u1))
 
 
 @inline
 def cosine_hemisphere(nx, ny, nz, u1, u2):
     """Cosine-weighted direction about the unit normal n."""
-    r = math.sqrt(u1)
-    c, s = sincos_2pi(u2)
-    return to_world(r * c, r * s, math.sqrt(max(0.0, 1.0 - u1)), nx, ny, nz)
+    t, s = orthonormal_basis(nx, ny, nz)
+    lx, ly, lz = cosine_lobe(u1, u2)
+    return in_frame(lx, ly, lz, t, s, (nx, ny, nz))
 
 
 @inline
@@ -154,12 +161,12 @@ def uniform_sphere(u1, u2):
 
 
 @inline
-def uniform_cone(ax, ay, az, cos_max, u1, u2):
-    """Direction uniform in solid angle within acos(cos_max) of the unit axis."""
+def cone_lobe(cos_max, u1, u2):
+    """Direction uniform in solid angle within acos(cos_max) of +z: (x, y, z)."""
     cos_t = 1.0 - u1 * (1.0 - cos_max)
     sin_t = math.sqrt(max(0.0, 1.0 - cos_t * cos_t))
     c, s = sincos_2pi(u2)
-    return to_world(sin_t * c, sin_t * s, cos_t, ax, ay, az)
+    return sin_t * c, sin_t * s, cos_t
 
 
 @inline
