@@ -7,8 +7,10 @@ For each scene (the Cornell box and a 100k-triangle room) the tracer runs once w
 times, the tracer runs unhooked (ours) and the recorded rays are re-traced with plain
 `EmbreeScene.run(..., output=True)`, one `run` per recorded call, as the tracer makes them, all
 calls spread over a pool of the same number of threads (raw: Embree alone, with no dependencies
-between calls, so perfectly load-balanced). Both exclude the BVH build. The overhead ratio ours/raw − 1 is what we watch: it is measured
-side by side in one run, so it holds across machines where absolute timings do not.
+between calls, so perfectly load-balanced). Both exclude the BVH build; ours includes emission
+and everything else a batch needs. The overhead ratio ours/raw − 1 is what we watch: it is
+measured side by side in one run, so it holds across machines where absolute timings do not (on
+a shared machine, mind the load average printed with it).
 """
 from __future__ import annotations
 
@@ -120,11 +122,13 @@ def measure(name: str, scene, photons: int, threads: int, repeats: int, seed: in
     raw.close()
     assert st.rays == sum(len(c[0]) for c in calls), "the timed trace sent different rays"
     ours, embree = min(ours_s), min(raw_s)
+    paired = sorted(a / b - 1.0 for a, b in zip(ours_s, raw_s))
     return {
         "scene": name, "triangles": scene.triangle_count, "photons": stats.photons,
         "bounces": scene.default_bounces, "rays": stats.rays, "segments": stats.segments,
         "hits": stats.hits, "embree_calls": len(calls), "threads": threads,
         "ours_seconds": ours, "raw_embree_seconds": embree, "overhead": ours / embree - 1.0,
+        "overhead_paired_median": paired[len(paired) // 2],
         "segments_per_second": stats.segments / ours, "photons_per_second": stats.photons / ours,
         "raw_rays_per_second": stats.rays / embree,
         "ours_seconds_all": ours_s, "raw_embree_seconds_all": raw_s,
@@ -155,27 +159,36 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="fewer photons and one repeat")
     ap.add_argument("--json", type=Path, default=RESULTS, help=f"results file (default {RESULTS})")
     ap.add_argument("--threads", type=int, default=0, help="threads (default: numba's thread count)")
-    ap.add_argument("--repeats", type=int, default=None, help="timed runs per scene; the fastest counts")
+    ap.add_argument("--repeats", type=int, default=None,
+                    help="timed runs per scene, ours and raw alternately (default 5, 1 with --quick)")
     args = ap.parse_args(argv)
     photons = args.photons or (200_000 if args.quick else 1_000_000)
-    repeats = args.repeats or (1 if args.quick else 3)
+    repeats = args.repeats or (1 if args.quick else 5)
     import numba
     threads = args.threads or numba.config.NUMBA_NUM_THREADS
 
     cases = [("cornell_box", scenes.cornell_box()), ("dense_room", scenes.dense_room())]
+    load = [os.getloadavg()[0]]
+    if load[0] > 0.5:
+        print(f"warning: load average {load[0]:.2f} before timing: other processes share the cores")
     rows = [measure(name, sc, photons, threads, repeats) for name, sc in cases]
+    load.append(os.getloadavg()[0])
 
     head = f"{'scene':<12} {'tris':>7} {'photons':>9} {'segments':>10} {'ours s':>8} {'raw s':>8} " \
-           f"{'overhead':>9} {'Mseg/s':>7} {'Mph/s':>6}"
+           f"{'overhead':>9} {'paired':>7} {'Mseg/s':>7} {'Mph/s':>6}"
     print(head)
     print("-" * len(head))
     for r in rows:
         print(f"{r['scene']:<12} {r['triangles']:>7} {r['photons']:>9} {r['segments']:>10} "
               f"{r['ours_seconds']:>8.3f} {r['raw_embree_seconds']:>8.3f} {r['overhead']:>+9.1%} "
+              f"{r['overhead_paired_median']:>+7.1%} "
               f"{r['segments_per_second'] / 1e6:>7.2f} {r['photons_per_second'] / 1e6:>6.2f}")
     args.json.parent.mkdir(parents=True, exist_ok=True)
+    print(f"overhead = fastest ours / fastest raw - 1; paired = median over repeats of ours/raw - 1; "
+          f"load average {load[0]:.2f} -> {load[1]:.2f}")
     args.json.write_text(json.dumps({"benchmark": "trace", "environment": environment(threads),
-                                     "photons": photons, "repeats": repeats, "results": rows}, indent=2))
+                                     "photons": photons, "repeats": repeats, "load_average": load,
+                                     "results": rows}, indent=2))
     print(f"wrote {args.json}")
     return 0
 

@@ -388,9 +388,10 @@ class PhotonTracer:
         self._caster: Optional[RayCaster] = None
         self._pool: Optional[ThreadPoolExecutor] = None
         # Records per photon, for the first batch's arrays: paths in a closed scene of the mean
-        # survival probability, with a margin; later batches go by what earlier ones made.
+        # survival probability; later batches go by what earlier ones made. (A batch that makes
+        # more grows its arrays at the end.)
         q = float(np.mean(self.materials[self.material_of, 3])) if len(self.material_of) else 0.0
-        self._per_photon = 1.25 * sum(min(q, 0.95) ** b for b in range(min(self.bounces, 200) + 1))
+        self._per_photon = sum(min(q, 0.95) ** b for b in range(min(self.bounces, 200) + 1))
         self._per_photon_hits = self._per_photon
 
     @property
