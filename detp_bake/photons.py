@@ -4,9 +4,9 @@ records density estimators use — path segments (DETP family) and surface hits 
 A bounce is one diffuse reflection. `bounces` caps the reflections a photon may have made before it
 lands (0 = direct light only), exactly as Cycles' Light Paths › Diffuse bounces does for its bake.
 Reflection uses Russian roulette with survival probability max(albedo), so the expected flux is
-exact and a path ends on its own in closed scenes. Every random number of a photon's path is a
-hash of (seed, photon id, bounce) (`sampling.py`), and records are laid out in an order fixed by the
-batch size alone, so a bake is deterministic for a seed whatever the thread count.
+exact and a path ends on its own in closed scenes. Each photon draws its random numbers from its
+own stream, started from (seed, photon id) (`sampling.py`), and records are laid out in an order
+fixed by the batch size alone, so a bake is deterministic for a seed whatever the thread count.
 """
 from __future__ import annotations
 

@@ -4,7 +4,8 @@ Every photon has its own random stream: SplitMix64 (a Weyl sequence through a 64
 at a hash of (seed, photon id). Emission draws the first numbers, each bounce the next ones, and the
 state travels with the photon's ray. A photon's path is thereby a function of the seed and its id
 alone — whatever the batch size, the thread count or the order in which rays are traced — and the
-numbers are made where they are used, in parallel, with nothing drawn ahead or stored.
+numbers are made where they are used, in parallel, with nothing drawn ahead. Uniforms come two at a
+time with 32 random bits each: as many as float32 records can show.
 
 The sampling functions are scalar `numba` functions, inlined into the emission and bounce
 kernels; each maps uniforms in [0, 1) to a point or direction.
@@ -19,9 +20,8 @@ import numpy as np
 _GAMMA = np.uint64(0x9E3779B97F4A7C15)  # 2^64 / golden ratio, SplitMix64's increment
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
-_S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
-_S32, _LOW32 = np.uint64(32), np.uint64(0xFFFFFFFF)
-_UNIT = 1.0 / 9007199254740992.0  # 2^-53
+_S30, _S27, _S31, _S32 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(32)
+_LOW32 = np.uint64(0xFFFFFFFF)
 _UNIT32 = 1.0 / 4294967296.0  # 2^-32
 
 # Kernels may fuse a multiply and an add (one rounding instead of two: as accurate, and faster).
@@ -58,36 +58,13 @@ def photon_rng(key, photon_id):
 
 
 @inline
-def uniform(state):
-    """(next state, uniform in [0, 1) with 53 random bits)."""
-    state = state + _GAMMA
-    return state, np.float64(np.int64(mix64(state) >> _S11)) * _UNIT
-
-
-@inline
 def uniform2(state):
     """(next state, two uniforms in [0, 1) with 32 random bits each): as many bits as float32
-    results can use, at half the cost."""
+    results can use, at half the cost of two 53-bit ones."""
     state = state + _GAMMA
     z = mix64(state)
     return (state, np.float64(np.int64(z >> _S32)) * _UNIT32,
             np.float64(np.int64(z & _LOW32)) * _UNIT32)
-
-
-def uniforms(key: np.uint64, photon_ids: np.ndarray, count: int) -> np.ndarray:
-    """The first `count` numbers of each photon's stream, (len(photon_ids), count) (for tests)."""
-    return _uniforms(np.uint64(key), np.asarray(photon_ids, np.int64), int(count))
-
-
-@jit
-def _uniforms(key, ids, count):
-    out = np.empty((ids.shape[0], count))
-    for i in range(ids.shape[0]):
-        state = photon_rng(key, ids[i])
-        for j in range(count):
-            state, u = uniform(state)
-            out[i, j] = u
-    return out
 
 
 # Taylor coefficients of sin and cos, for x in [−π/4, π/4] (truncation error < 1e-10)
