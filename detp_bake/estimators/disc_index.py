@@ -4,8 +4,9 @@ index from its origin to its end, adding its flux to each disc it crosses.
 The index is a balanced BVH over the bounds of the discs' cylinders (see discs.py), built once;
 photons then stream through it batch by batch, so memory does not grow with the photon count.
 Each thread splats its share of a batch into its own accumulator; they are summed at the end.
-Measured against an Embree scene of disc quads (benchmarks/disc_index_embree.py), this compiled
-index is the faster of the two, so it is the one in the product.
+Measured against Embree scenes of disc quads in non-overlapping layers (benchmarks/
+disc_index_embree.py: one trace per layer and per hit, since Embree reports only the nearest hit),
+this compiled index is 2.0-2.5x faster on 2 cores, so it is the one in the product.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import numpy as np
 from . import Estimate, Estimator, register
 from .bvh import build
 from .discs import crossing_weight, make_discs
+from .morton import morton_order
 
 
 @numba.njit(cache=True, parallel=True)
@@ -91,7 +93,13 @@ class DiscIndex(Estimator):
     def add(self, batch):
         t0 = time.perf_counter()
         d, t = self.discs, self.bvh
-        _splat(batch.seg_origin, batch.seg_dir, batch.seg_length, batch.seg_flux, d.eps, t.lo, t.hi,
+        # Walk segments in Z-order of their midpoints: consecutive walks visit the same nodes and
+        # discs, so they stay in cache (about 2x faster than photon order, measured).
+        mid = batch.seg_origin + batch.seg_dir * (0.5 * batch.seg_length)[:, None]
+        order = morton_order(mid) if len(mid) else np.zeros(0, np.int64)
+        o, w, length, flux = (np.ascontiguousarray(a[order]) for a in
+                              (batch.seg_origin, batch.seg_dir, batch.seg_length, batch.seg_flux))
+        _splat(o, w, length, flux, d.eps, t.lo, t.hi,
                t.left, t.right, t.start, t.count, t.order, d.centre, d.normal, d.radius, d.slab, d.kernel,
                self.acc, self.stats)
         self.segments += batch.segment_count
