@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import plots  # noqa: E402
 import scenes  # noqa: E402  (puts the repository root on sys.path)
 from estimators import run, trace, warm_up  # noqa: E402
 
@@ -115,13 +116,9 @@ def markdown(label, res):
     return "\n".join(lines)
 
 
-def plots(label, res, out):
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("matplotlib not installed: no plots (pip install -r requirements/bench.txt)")
+def plot_scene(label, res, out):
+    plt = plots.pyplot()
+    if plt is None:
         return []
     fig, ax = plt.subplots(1, 3, figsize=(14, 4))
     for name in ("sphere_cache", "disc_index"):
@@ -164,7 +161,7 @@ def main(argv=None):
         centre, radius = scene.bounds()
         res["scaling"] = scaling(scene, cfg, world_radius=radius / 50)
         res["threads"] = numba.get_num_threads()
-        res["plots"] = plots(label, res, out)
+        res["plots"] = plot_scene(label, res, out)
         results[label] = res
         text.append(markdown(label, res))
         print(text[-1], "\n", flush=True)

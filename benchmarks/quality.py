@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import plots  # noqa: E402
 import scenes  # noqa: E402  (puts the repository root on sys.path)
 
 import numba  # noqa: E402
@@ -115,12 +116,8 @@ def markdown(res):
 
 
 def plot(res, out):
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("matplotlib not installed: no plot (pip install -r requirements/bench.txt)")
+    plt = plots.pyplot()
+    if plt is None:
         return None
     fig, ax = plt.subplots(figsize=(6, 4.5))
     for method in dict.fromkeys(r["method"] for r in res["rows"]):

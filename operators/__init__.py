@@ -6,11 +6,4 @@ from . import bake, compare, lightmap
 classes = bake.classes + lightmap.classes + compare.classes
 
 
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)

@@ -132,11 +132,4 @@ classes = (DETPBAKE_PT_main, DETPBAKE_PT_photons, DETPBAKE_PT_estimator, DETPBAK
            DETPBAKE_PT_object, DETPBAKE_PT_compare, DETPBAKE_PT_stats)
 
 
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)
