@@ -140,9 +140,12 @@ def main(argv=None):
     group.add_argument("--quick", action="store_true", help="seconds: checks that the script works")
     group.add_argument("--full", action="store_true", help="the full sweeps")
     ap.add_argument("--scenes", default="cornell_box,patio")
+    ap.add_argument("--estimators", default=None, help="comma-separated subset of the configuration's estimators")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = ap.parse_args(argv)
-    cfg = CONFIGS["quick" if args.quick else "full" if args.full else "short"]
+    cfg = dict(CONFIGS["quick" if args.quick else "full" if args.full else "short"])
+    if args.estimators:
+        cfg["estimators"] = args.estimators.split(",")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = []
