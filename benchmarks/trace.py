@@ -55,26 +55,29 @@ def record_rays(scene, photons: int, threads: int, seed: int):
 
 
 def time_ours(scene, photons: int, threads: int, seed: int):
-    """Wall time of a whole trace (every batch produced), less the ray caster's construction."""
-    build = []
+    """Wall and CPU (all threads) time of a whole trace (every batch produced), less the ray
+    caster's construction."""
+    build, build_cpu = [], []
     original = RayCaster.__init__
 
     def timed_init(self, *args, **kwargs):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         original(self, *args, **kwargs)
         _commit(self.scene)
         build.append(time.perf_counter() - t0)
+        build_cpu.append(time.process_time() - c0)
 
     RayCaster.__init__ = timed_init
     try:
         tracer = PhotonTracer(scene, photons, scene.default_bounces, seed, threads=threads)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for _ in tracer.batches():
             pass
         seconds = time.perf_counter() - t0 - sum(build)
+        cpu = time.process_time() - c0 - sum(build_cpu)
     finally:
         RayCaster.__init__ = original
-    return seconds, tracer.stats
+    return seconds, cpu, tracer.stats
 
 
 def _commit(embree_scene):
@@ -95,15 +98,15 @@ class RawEmbree:
         self.threads = threads
         self.pool = ThreadPoolExecutor(threads)
 
-    def trace(self, calls) -> float:
-        """Seconds to run every recorded call, each one `run` as the tracer makes it, all of them
-        spread over the threads."""
+    def trace(self, calls) -> tuple[float, float]:
+        """Wall and CPU seconds to run every recorded call, each one `run` as the tracer makes
+        it, all of them spread over the threads."""
         run = self.scene.run
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         jobs = [self.pool.submit(run, origins, dirs, output=True) for origins, dirs in calls]
         for j in jobs:
             j.result()
-        return time.perf_counter() - t0
+        return time.perf_counter() - t0, time.process_time() - c0
 
     def close(self):
         self.pool.shutdown()
@@ -114,11 +117,14 @@ def measure(name: str, scene, photons: int, threads: int, repeats: int, seed: in
     calls, stats = record_rays(scene, photons, threads, seed)
     raw = RawEmbree(scene, threads)
     raw.trace(calls[:2])
-    ours_s, raw_s = [], []
+    ours_s, raw_s, ours_cpu, raw_cpu = [], [], [], []
     for _ in range(repeats):
-        s, st = time_ours(scene, photons, threads, seed)
+        s, cpu, st = time_ours(scene, photons, threads, seed)
         ours_s.append(s)
-        raw_s.append(raw.trace(calls))
+        ours_cpu.append(cpu)
+        s, cpu = raw.trace(calls)
+        raw_s.append(s)
+        raw_cpu.append(cpu)
     raw.close()
     assert st.rays == sum(len(c[0]) for c in calls), "the timed trace sent different rays"
     ours, embree = min(ours_s), min(raw_s)
@@ -129,9 +135,12 @@ def measure(name: str, scene, photons: int, threads: int, repeats: int, seed: in
         "hits": stats.hits, "embree_calls": len(calls), "threads": threads,
         "ours_seconds": ours, "raw_embree_seconds": embree, "overhead": ours / embree - 1.0,
         "overhead_paired_median": paired[len(paired) // 2],
+        "ours_cpu_seconds": min(ours_cpu), "raw_embree_cpu_seconds": min(raw_cpu),
+        "cpu_overhead": min(ours_cpu) / min(raw_cpu) - 1.0,
         "segments_per_second": stats.segments / ours, "photons_per_second": stats.photons / ours,
         "raw_rays_per_second": stats.rays / embree,
         "ours_seconds_all": ours_s, "raw_embree_seconds_all": raw_s,
+        "ours_cpu_seconds_all": ours_cpu, "raw_embree_cpu_seconds_all": raw_cpu,
     }
 
 
@@ -175,16 +184,17 @@ def main(argv=None) -> int:
     load.append(os.getloadavg()[0])
 
     head = f"{'scene':<12} {'tris':>7} {'photons':>9} {'segments':>10} {'ours s':>8} {'raw s':>8} " \
-           f"{'overhead':>9} {'paired':>7} {'Mseg/s':>7} {'Mph/s':>6}"
+           f"{'overhead':>9} {'paired':>7} {'cpu':>7} {'Mseg/s':>7} {'Mph/s':>6}"
     print(head)
     print("-" * len(head))
     for r in rows:
         print(f"{r['scene']:<12} {r['triangles']:>7} {r['photons']:>9} {r['segments']:>10} "
               f"{r['ours_seconds']:>8.3f} {r['raw_embree_seconds']:>8.3f} {r['overhead']:>+9.1%} "
-              f"{r['overhead_paired_median']:>+7.1%} "
+              f"{r['overhead_paired_median']:>+7.1%} {r['cpu_overhead']:>+7.1%} "
               f"{r['segments_per_second'] / 1e6:>7.2f} {r['photons_per_second'] / 1e6:>6.2f}")
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    print(f"overhead = fastest ours / fastest raw - 1; paired = median over repeats of ours/raw - 1; "
+    print(f"overhead = fastest ours / fastest raw - 1 (wall); paired = median over repeats of ours/raw - 1; "
+          f"cpu = the same with CPU time of all threads (steadier when other processes share the cores); "
           f"load average {load[0]:.2f} -> {load[1]:.2f}")
     args.json.write_text(json.dumps({"benchmark": "trace", "environment": environment(threads),
                                      "photons": photons, "repeats": repeats, "load_average": load,
