@@ -3,7 +3,9 @@
 Each light becomes an `Emitter` that knows its emitted flux (RGB watts) and can draw photons
 (origin, direction, flux). Photons are shared out between emitters in proportion to their flux,
 with deterministic counts (largest remainder), so every photon of one emitter carries about the
-same flux and the total emitted flux is exact.
+same flux and the total emitted flux is exact. Each light type has a compiled kernel; photon i
+draws its numbers from its own random stream (`sampling.py`), so emission can run in pieces, in
+any order, on any thread.
 """
 from __future__ import annotations
 
