@@ -165,7 +165,13 @@ def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional
 
     mean_albedo = float(np.clip(scene.albedo.mean(), 0.0, 0.999)) if scene.triangle_count else 0.0
     expected_segments = int(tracer.photons * sum(mean_albedo ** b for b in range(min(bounces, 64) + 1)))
-    context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments)
+    clearance = None
+    if any(name != "photon_map" for name in names):
+        from .estimators.discs import SLAB, disc_radius
+        radius = disc_radius(texels, settings.estimator_settings)
+        clearance = texels_mod.tangent_clearance(texels, scene.positions, radius, 0.5 * SLAB * radius)
+    context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
+                                 clearance=clearance)
     stored_mb = expected_segments * HIT_BYTES / 1e6
     if "photon_map" in names and settings.memory_budget_mb and stored_mb > settings.memory_budget_mb:
         raise BakeError(f"the photon map would keep about {stored_mb:,.0f} MB of photon hits, over the memory "

@@ -269,3 +269,29 @@ def resolution_for_density(positions: np.ndarray, uvs: np.ndarray, texels_per_me
         return multiple
     side = np.sqrt(world / uv_area) * float(texels_per_metre)
     return int(min(limit, max(multiple, multiple * np.ceil(side / multiple))))
+
+
+def tangent_clearance(texels: TexelSet, positions: np.ndarray, reach: np.ndarray, lift: np.ndarray,
+                      directions: int = 8) -> np.ndarray:
+    """How far each texel's surface runs in its tangent plane before other geometry: the nearest
+    hit of `directions` rays cast along the tangent plane, `lift` above the surface (so the
+    surface itself is not hit), up to `reach`. Nothing within reach gives `reach`."""
+    from .photons import RayCaster
+
+    n = texels.normal
+    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t = np.cross(n, helper)
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    s = np.cross(n, t)
+    origin = texels.position + n * lift[:, None]
+    caster = RayCaster(positions)
+    best = reach.astype(np.float64).copy()
+    for k in range(directions):
+        a = 2.0 * np.pi * k / directions
+        d = np.cos(a) * t + np.sin(a) * s
+        far = reach.astype(np.float32).copy()
+        dist, prim, _ = caster.intersect(np.ascontiguousarray(origin, np.float32),
+                                         np.ascontiguousarray(d, np.float32), far)
+        hit = prim >= 0
+        best[hit] = np.minimum(best[hit], dist[hit])
+    return best

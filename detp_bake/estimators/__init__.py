@@ -32,6 +32,7 @@ class Context:
     """What an estimator may need to know of the bake beyond the texels."""
     scene_radius: float = 1.0
     expected_segments: int = 0  # an estimate made before tracing, for work limits
+    clearance: Optional[np.ndarray] = None  # per texel, free distance in its tangent plane (DETP discs)
 
 
 @dataclass

@@ -81,7 +81,7 @@ class DiscIndex(Estimator):
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)
         t0 = time.perf_counter()
-        self.discs = make_discs(texels, settings, self.context.scene_radius)
+        self.discs = make_discs(texels, settings, self.context.scene_radius, self.context.clearance)
         self.bvh = build(*self.discs.bounds())
         self.seconds_build = time.perf_counter() - t0
         self.threads = numba.get_num_threads()

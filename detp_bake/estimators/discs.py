@@ -53,13 +53,22 @@ class Discs:
         return c, np.sqrt(self.radius ** 2 + (0.5 * self.slab) ** 2) + self.eps
 
 
-def make_discs(texels: TexelSet, settings, scene_radius: float) -> Discs:
+def disc_radius(texels: TexelSet, settings) -> np.ndarray:
+    """Each texel's disc radius: `radius` metres, or `radius_texels` of its own lightmap."""
+    if settings.radius is not None:
+        return np.full(len(texels), float(settings.radius))
+    return texels.per_texel([lm.texel_size for lm in texels.lightmaps]) * float(settings.radius_texels)
+
+
+def make_discs(texels: TexelSet, settings, scene_radius: float, clearance=None) -> Discs:
+    """`clearance`: per texel, how far the surface runs in its tangent plane before other
+    geometry stands in the way (texels.tangent_clearance); discs are cut to it, so a floor's disc
+    does not reach past the wall beside it into light on the wall's other side."""
     if settings.kernel not in KERNELS:
         raise BakeError(f"setting 'kernel' = {settings.kernel!r}: choose {', '.join(KERNELS)}")
-    if settings.radius is not None:
-        radius = np.full(len(texels), float(settings.radius))
-    else:
-        radius = texels.per_texel([lm.texel_size for lm in texels.lightmaps]) * float(settings.radius_texels)
+    radius = disc_radius(texels, settings)
+    if clearance is not None:
+        radius = np.minimum(radius, np.maximum(clearance, 0.25 * radius))
     if not np.all(radius > 0):
         raise BakeError("disc radius is zero: a lightmap has no texel area (check its UVs)")
     eps = 1e-6 * max(scene_radius, 1e-3)
