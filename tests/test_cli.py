@@ -28,7 +28,8 @@ def test_python_m_detp_bake_bakes_applies_and_saves(tmp_path, bpy):
     report = json.loads((out / "report.json").read_text())
     assert [o["name"] for o in report["objects"]] == ["Floor", "TallBox"]
     assert report["photons"] == 100_000 and report["segments"] >= report["hits"] > 0
-    assert set(report["seconds"]) >= {"export", "trace", "estimate", "write"}
+    phases = set(report["seconds"])  # the report names every phase (no timing is checked)
+    assert phases >= {"export", "trace", "estimate", "write"}
     assert report["settings"]["bounces"] == 4  # the scene's Cycles diffuse bounces
     for name in ("Floor.photon_map.exr", "Floor.photon_map.png", "TallBox.photon_map.exr"):
         assert (out / name).stat().st_size > 0
