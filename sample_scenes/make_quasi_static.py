@@ -25,6 +25,7 @@ import sys
 import bpy
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from make_cornell_box import add_lightmap_uv  # noqa: E402
 from make_patio import box, quad_grid  # noqa: E402
 from make_tree import (MeshBuilder, add_camera, make_material, mesh_triangles, save,  # noqa: E402
                        set_render, set_world)
@@ -42,27 +43,7 @@ BLUE = (0.25, 0.40, 0.62)
 TABLE_WOOD = (0.55, 0.43, 0.32)
 YELLOW = (0.78, 0.62, 0.22)
 # Lightmap Pack "Margin" as in make_cornell_box.py: 2/100 of the UV space between charts.
-LIGHTMAP_MARGIN = 1.0
 DEFAULT_OUTPUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "quasi_static.blend")
-
-
-def add_lightmap_uv(obj):
-    """Add a "Lightmap" UV layer filled by Lightmap Pack; keep "UVMap" active."""
-    me = obj.data
-    me.uv_layers.active = me.uv_layers.new(name="Lightmap")  # the operator writes the active layer
-    view_layer = bpy.context.view_layer
-    for other in view_layer.objects:
-        other.select_set(other is obj)
-    view_layer.objects.active = obj
-    bpy.ops.object.mode_set(mode='EDIT')
-    bpy.ops.mesh.select_all(action='SELECT')
-    bpy.ops.uv.lightmap_pack(PREF_CONTEXT='ALL_FACES', PREF_PACK_IN_ONE=True,
-                             PREF_NEW_UVLAYER=False, PREF_MARGIN_DIV=LIGHTMAP_MARGIN)
-    bpy.ops.object.mode_set(mode='OBJECT')
-    texture_uv = me.uv_layers["UVMap"]  # look up again: edit mode rebuilt the layers
-    me.uv_layers.active = texture_uv
-    texture_uv.active_render = True
-    obj.select_set(False)
 
 
 def add_object(name, builder, material, location=(0.0, 0.0, 0.0)):
