@@ -1,0 +1,198 @@
+"""Chart-aware OIDN denoising (detp_bake.denoise) on analytic irradiance fields with known noise.
+
+Noise model: a photon count's noise, σ(E) = level · √(E · Ē), the same draw in all three channels
+(one light, one set of photons), 0 in the gutter as a bake leaves it. Fixed seeds throughout.
+"""
+import sys
+
+import numpy as np
+import pyoidn
+import pytest
+
+from detp_bake import denoise
+from detp_bake.errors import BakeError
+
+TINT = np.array([1.0, 0.85, 0.7], np.float32)
+LEVEL = 0.1  # relative noise at the mean irradiance
+
+
+def _point_light(n):
+    """E/π (up to a constant) of a point light 0.35 above a unit square, plus an ambient term."""
+    j, i = np.mgrid[0:n, 0:n]
+    x, y, h = (i + 0.5) / n, (j + 0.5) / n, 0.35
+    e = 0.15 + 2.0 * h ** 3 / ((x - 0.3) ** 2 + (y - 0.6) ** 2 + h * h) ** 1.5
+    return (e[..., None] * TINT).astype(np.float32)
+
+
+def _charts(n):
+    """Three charts with gutters between them: a wide rectangle, a disc and a square."""
+    g = n // 32
+    m = np.zeros((n, n), bool)
+    m[g:n // 2 - g, g:n - g] = True
+    j, i = np.mgrid[0:n, 0:n]
+    m |= (i - 0.3 * n) ** 2 + (j - 0.75 * n) ** 2 < (0.18 * n) ** 2
+    m[n // 2 + g:n - g, n // 2 + 2 * g:n - g] = True
+    return m
+
+
+def _noisy(truth, mask, rng, level=LEVEL, disc=False):
+    z = rng.standard_normal(truth.shape[:2])
+    if disc:  # shared crossings: a 3x3 box (the 1.5-texel disc), rescaled to the same σ
+        p = np.pad(z, 1, mode="reflect")
+        h, w = z.shape
+        z = sum(p[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+                for dy in (-1, 0, 1) for dx in (-1, 0, 1)) / 3.0
+    lum = truth[..., 0]
+    sigma = level * np.sqrt(lum * lum[mask].mean())
+    img = np.maximum(truth * (1 + sigma / lum * z)[..., None], 0.0)
+    return np.where(mask[..., None], img, 0.0).astype(np.float32)
+
+
+def _rel_rmse(a, truth, mask):
+    return float(np.sqrt(np.mean((a[mask] - truth[mask]) ** 2)) / truth[mask].mean())
+
+
+def _mean_error(a, raw, mask):
+    return np.abs(a[mask].mean(axis=0, dtype=np.float64) / raw[mask].mean(axis=0, dtype=np.float64)
+                  - 1)
+
+
+UP = np.broadcast_to(np.array([0, 0, 1], np.float32), (128, 128, 3))
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"filter": "RT"}, {"normal": UP}],
+                         ids=["RTLightmap", "RT", "RT+normal"])
+def test_white_noise_is_cut_several_times_and_the_chart_mean_kept(kwargs):
+    truth, mask = _point_light(128), _charts(128)
+    raw = _noisy(truth, mask, np.random.default_rng(1))
+    out = denoise.denoise_lightmap(raw, mask, **kwargs)
+    assert out.shape == raw.shape and out.dtype == np.float32
+    before, after = _rel_rmse(raw, truth, mask), _rel_rmse(out, truth, mask)
+    assert before == pytest.approx(LEVEL, rel=0.1)
+    assert after < before / 3  # measured: 10 % -> 1.5-1.9 %
+    assert (_mean_error(out, raw, mask) < 0.005).all()
+
+
+def test_oidn_itself_moves_the_mean_little_which_keep_energy_then_removes():
+    truth, mask = _point_light(128), _charts(128)
+    raw = _noisy(truth, mask, np.random.default_rng(2))
+    free = denoise.denoise_lightmap(raw, mask, keep_energy=False)
+    kept = denoise.denoise_lightmap(raw, mask)
+    shift = denoise.mean_shift(raw, free, mask)
+    assert (np.abs(shift) < 0.005).all()  # measured ~0.1 %
+    assert np.abs(denoise.mean_shift(raw, kept, mask)).max() < 1e-5
+    # keep_energy is one factor per channel: the shape is the same.
+    ratio = kept[mask] / free[mask]
+    assert np.allclose(ratio, ratio.mean(axis=0, dtype=np.float64), rtol=1e-5)
+
+
+def test_disc_correlated_noise_is_not_made_worse():
+    """OIDN reads noise shared over 1.5-texel discs as signal (DESIGN.md §7): it removes little
+    of it, but it must not add error or move the energy."""
+    truth, mask = _point_light(128), _charts(128)
+    raw = _noisy(truth, mask, np.random.default_rng(3), disc=True)
+    out = denoise.denoise_lightmap(raw, mask)
+    assert _rel_rmse(out, truth, mask) < 1.05 * _rel_rmse(raw, truth, mask)
+    assert (_mean_error(out, raw, mask) < 0.005).all()
+
+
+# Two charts side by side with an 8-texel gutter between them; chart A's irradiance rises towards
+# the gutter, chart B falls away from it, so A's border sits in the middle of a gradient.
+H = W = 128
+A_COLS, B_COLS, ROWS = (4, 60), (68, 124), (4, 124)
+
+
+def _two_charts():
+    x = (np.arange(W) + 0.5) / W
+    e = np.where(x < 0.5, 0.3 + 1.2 * x, 2.0 - 1.2 * x)
+    truth = (np.repeat(e[None, :], H, 0)[..., None] * TINT).astype(np.float32)
+    mask = np.zeros((H, W), bool)
+    mask[ROWS[0]:ROWS[1], A_COLS[0]:A_COLS[1]] = True
+    mask[ROWS[0]:ROWS[1], B_COLS[0]:B_COLS[1]] = True
+    return truth, mask
+
+
+@pytest.mark.parametrize("gutter", [0.0, 50.0, np.nan], ids=["zero", "garbage", "nan"])
+@pytest.mark.parametrize("flt", ["RTLightmap", "RT"])
+def test_no_seam_at_chart_borders_whatever_the_gutter_held(gutter, flt):
+    truth, mask = _two_charts()
+    rng = np.random.default_rng(4)
+    noisy = truth * (1 + LEVEL * rng.standard_normal((H, W)))[..., None]
+    img = np.where(mask[..., None], noisy, gutter).astype(np.float32)
+    out = denoise.denoise_lightmap(img, mask, filter=flt)
+
+    rows = slice(ROWS[0] + 4, ROWS[1] - 4)  # away from the charts' corners
+    n_rows = rows.stop - rows.start
+    # Mean relative error along one column: the raw noise alone gives it σ = LEVEL / √n_rows.
+    tol = 3 * LEVEL / np.sqrt(n_rows)
+
+    def bias(a, col):
+        return float(np.mean((a[rows, col] - truth[rows, col]) / truth[rows, col]))
+
+    border_a, border_b = A_COLS[1] - 1, B_COLS[0]
+    for col in (border_a, border_a - 1, border_b, border_b + 1):
+        assert abs(bias(out, col)) < tol, (col, bias(out, col), tol)
+    # The check can tell: OIDN on the raw image, gutter as it was, is pulled towards the gutter.
+    if np.isfinite(gutter):
+        kw = {"hdr": True} if flt == "RT" else {}
+        naive = pyoidn.denoise(img, filter_type=flt, **kw)
+        assert abs(bias(naive, border_a)) > tol
+    # The gutter is refilled from the denoised texels: its first ring is their neighbour mean.
+    ring = out[rows, border_a + 1]
+    expect = (out[rows.start - 1:rows.stop - 1, border_a] + out[rows, border_a]
+              + out[rows.start + 1:rows.stop + 1, border_a]) / 3
+    assert np.allclose(ring, expect, rtol=1e-5)
+    assert np.isfinite(out).all() and (out[ROWS[0]:ROWS[1], border_a:border_b + 1] > 0).all()
+
+
+@pytest.mark.parametrize("flt", [None, "RT"])
+def test_black_lightmap_stays_black_and_gutter_garbage_is_not_read(flt):
+    mask = _charts(64)
+    img = np.where(mask[..., None], np.zeros(3), np.nan).astype(np.float32)
+    out = denoise.denoise_lightmap(img, mask, filter=flt)
+    assert not np.isnan(out).any()
+    assert (out == 0).all()
+    assert (denoise.denoise_lightmap(np.zeros((8, 8, 3), np.float32), np.zeros((8, 8), bool))
+            == 0).all()
+
+
+@pytest.mark.parametrize("flt", [None, "RT"])
+def test_awkward_lightmaps_never_give_nan(flt):
+    rng = np.random.default_rng(5)
+    mask = _charts(64)
+    lit = _noisy(_point_light(64), mask, rng)
+    half = lit.copy()
+    half[:, :32] = 0  # a chart half in full shadow
+    one = np.zeros((64, 64), bool)
+    one[20, 30] = True  # a single covered texel
+    cases = [(lit * 1e-30, mask), (lit * 1e6, mask), (half, mask), (lit, one),
+             (lit, np.ones((64, 64), bool)), (lit - 0.05, mask)]  # the last one dips below 0
+    for img, m in cases:
+        out = denoise.denoise_lightmap(img.astype(np.float32), m, filter=flt)
+        assert np.isfinite(out).all() and (out >= 0).all()
+        assert out[m].any()
+
+
+def test_bad_input_is_a_bake_error_naming_it():
+    mask = _charts(32)
+    img = np.ones((32, 32, 3), np.float32)
+    bad = img.copy()
+    bad[mask.nonzero()[0][0], mask.nonzero()[1][0]] = np.nan
+    with pytest.raises(BakeError, match="NaN"):
+        denoise.denoise_lightmap(bad, mask)
+    with pytest.raises(BakeError, match="mask"):
+        denoise.denoise_lightmap(img, mask[:16])
+    with pytest.raises(BakeError, match="filter"):
+        denoise.denoise_lightmap(img, mask, filter="NLM")
+    with pytest.raises(BakeError, match="RTLightmap"):
+        denoise.denoise_lightmap(img, mask, normal=img, filter="RTLightmap")
+    with pytest.raises(BakeError, match="albedo"):
+        denoise.denoise_lightmap(img, mask, albedo=img[:, :16])
+
+
+def test_missing_pyoidn_is_a_bake_error_naming_the_package(monkeypatch):
+    # A None entry in sys.modules makes `import pyoidn` fail as it does where it is not installed.
+    monkeypatch.setitem(sys.modules, "pyoidn", None)
+    assert not denoise.available()
+    with pytest.raises(BakeError, match="pyoidn"):
+        denoise.denoise_lightmap(np.ones((8, 8, 3), np.float32), np.ones((8, 8), bool))
