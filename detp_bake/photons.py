@@ -21,7 +21,8 @@ import numba
 import numpy as np
 
 from .errors import BakeCancelled
-from .lights import PhotonSchedule, build_emitters
+from .lights import build_emitters
+from .schedule import BatchSchedule
 from .sampling import cosine_hemisphere, jit, uniform2
 from .scene import Scene
 
@@ -86,6 +87,10 @@ class RayCaster:
         receives the hit distances in place."""
         r = self.scene.run(origins, dirs, dists=tfar, output=True)
         return r["tfar"], r["primID"], r["Ng"]
+
+    def occluded(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> np.ndarray:
+        """Shadow rays: −1 where nothing lies within each ray's `tfar` (float32, overwritten)."""
+        return self.scene.run(origins, dirs, dists=tfar, query="OCCLUDED")
 
 
 RAY_FAR = 1e37  # a ray's initial tfar: no limit
@@ -195,6 +200,7 @@ class _Stream:
 
     def __init__(self):
         self.rays = self.hits = self.kept = 0
+        self.skip_rays = self.skip_hits = self.skip_kept = 0  # the first bounce's records, when left out
         self.sums = np.zeros((3, 3))
         self.embree_seconds = 0.0
         self._alloc(0, 0)
@@ -220,19 +226,29 @@ class _Stream:
         for a, b, n in zip(old, self._arrays(), [self.rays] * 5 + [self.hits] * 5):
             b[:n] = a[:n]
 
+    @property
+    def segment_count(self) -> int:
+        """Segments this stream hands to the batch."""
+        return self.kept - self.skip_kept
+
+    @property
+    def hit_count(self) -> int:
+        return self.hits - self.skip_hits
+
     def copy_to(self, seg: list[np.ndarray], seg_at: int, hit: list[np.ndarray], hit_at: int) -> None:
         """This stream's segments of positive length into rows `seg_at` … of a batch's segment
         arrays (origin, direction, length, flux), its hits into rows `hit_at` … of its hit arrays.
         numpy's block copies (memcpy) beat compiled loops several times here."""
-        n, nh = self.rays, self.hits
-        src = self.o[:n], self.d[:n], self.length[:n], self.f[:n]
-        if self.kept < n:  # some segment of zero length: none in a closed scene
-            keep = self.length[:n] > 0.0
-            src = tuple(a[keep] for a in src)
-        for dst, a in zip(seg, src):
-            dst[seg_at:seg_at + self.kept] = a
-        for dst, a in zip(hit, (self.hit_pos, self.hit_dir, self.hit_flux, self.hit_nrm, self.hit_tri)):
-            dst[hit_at:hit_at + nh] = a[:nh]
+        a, n, h, nh = self.skip_rays, self.rays, self.skip_hits, self.hits
+        src = self.o[a:n], self.d[a:n], self.length[a:n], self.f[a:n]
+        count = self.segment_count
+        if count < n - a:  # some segment of zero length: none in a closed scene
+            keep = self.length[a:n] > 0.0
+            src = tuple(x[keep] for x in src)
+        for dst, x in zip(seg, src):
+            dst[seg_at:seg_at + count] = x
+        for dst, x in zip(hit, (self.hit_pos, self.hit_dir, self.hit_flux, self.hit_nrm, self.hit_tri)):
+            dst[hit_at:hit_at + nh - h] = x[h:nh]
 
 
 # Stream buffers not in use, shared by all tracers (list.pop and append are atomic): a few
@@ -337,12 +353,13 @@ class _Records:
             self.waiting[index] = st
             while not self.full and self.placed < len(self.waiting) and self.waiting[self.placed] is not None:
                 nxt = self.waiting[self.placed]
-                if self.segments + nxt.kept > len(self.seg[0]) or self.hits + nxt.hits > len(self.hit[0]):
+                if self.segments + nxt.segment_count > len(self.seg[0]) or \
+                        self.hits + nxt.hit_count > len(self.hit[0]):
                     self.full = True
                     break
                 jobs.append((nxt, self.segments, self.hits))
-                self.segments += nxt.kept
-                self.hits += nxt.hits
+                self.segments += nxt.segment_count
+                self.hits += nxt.hit_count
                 self.waiting[self.placed] = None
                 self.placed += 1
         for job in jobs:
@@ -352,13 +369,13 @@ class _Records:
         """Every stream added and copied: place what did not fit, and hand out the batch."""
         rest = [st for st in self.waiting[self.placed:] if st is not None]
         for pool, arrays, used, more in zip(self.pools, (self.seg, self.hit), (self.segments, self.hits),
-                                            (sum(st.kept for st in rest), sum(st.hits for st in rest))):
+                                            (sum(st.segment_count for st in rest), sum(st.hit_count for st in rest))):
             if used + more > len(arrays[0]):
                 pool.grow(arrays, used + more, used)
         for st in rest:
             self._copy(st, self.segments, self.hits)
-            self.segments += st.kept
-            self.hits += st.hits
+            self.segments += st.segment_count
+            self.hits += st.hit_count
         return PhotonBatch(photons, *(a[:self.segments] for a in self.seg), *(a[:self.hits] for a in self.hit))
 
 
@@ -374,17 +391,23 @@ class PhotonTracer:
     MIN_STREAM = 1024
 
     def __init__(self, scene: Scene, photons: int, bounces: int, seed: int = 0,
-                 batch_size: int = 200_000, threads: int = 0):
+                 batch_size: int = 200_000, threads: int = 0, indirect_only: bool = False,
+                 caster: Optional[RayCaster] = None):
         self.scene = scene
         self.bounces = int(bounces)
-        self.schedule = PhotonSchedule(build_emitters(scene), int(photons), int(seed))
+        # Leave out each photon's first flight (light to first surface) and where it lands: the
+        # direct light, when it is sampled with shadow rays instead (direct.py).
+        self.indirect_only = bool(indirect_only)
+        self._shared_caster = caster
         self.batch_size = int(batch_size)
+        self.schedule = BatchSchedule(build_emitters(scene), int(photons), int(seed), self.batch_size)
         self.threads = threads or numba.config.NUMBA_NUM_THREADS
         self.centre, radius = scene.bounds()
         self.escape_radius = 1.1 * radius
         self.eps = max(1e-5 * radius, 1e-6)
         self.material_of, self.materials = material_table(scene.albedo)
-        self.stats = TraceStats(emitted=self.schedule.emitted_flux.copy())
+        self.stats = TraceStats()
+        self.batches_done = 0
         self._caster: Optional[RayCaster] = None
         self._pool: Optional[ThreadPoolExecutor] = None
         # Records per photon, for the first batch's arrays: paths in a closed scene of the mean
@@ -400,7 +423,13 @@ class PhotonTracer:
 
     @property
     def batch_count(self) -> int:
-        return -(-self.photons // self.batch_size)
+        return self.schedule.count
+
+    @property
+    def share(self) -> float:
+        """The share of the bake traced so far: estimates of the batches so far, divided by it,
+        are unbiased estimates of the whole."""
+        return self.schedule.share(self.batches_done)
 
     @classmethod
     def stream_bounds(cls, n: int) -> list[tuple[int, int]]:
@@ -415,7 +444,7 @@ class PhotonTracer:
 
     def batches(self, cancel: Optional[Callable[[], bool]] = None) -> Iterator[PhotonBatch]:
         if self._caster is None:
-            self._caster = RayCaster(self.scene.positions)
+            self._caster = self._shared_caster or RayCaster(self.scene.positions)
         if self.threads > 1:
             self._pool = ThreadPoolExecutor(self.threads)
         try:
@@ -423,10 +452,9 @@ class PhotonTracer:
                 if cancel is not None and cancel():
                     raise BakeCancelled()
                 t0 = time.perf_counter()
-                a = index * self.batch_size
-                b = min(self.photons, a + self.batch_size)
-                batch = self._trace_batch(a, b)
+                batch = self._trace_batch(index)
                 self.stats.seconds += time.perf_counter() - t0
+                self.batches_done = index + 1
                 yield batch
         finally:
             if self._pool is not None:
@@ -434,19 +462,20 @@ class PhotonTracer:
                 self._pool = None
             self._caster = None
 
-    def _trace_stream(self, records: _Records, index: int, start: int, stop: int) -> None:
-        """Photons [start, stop) of the bake through all their bounces, in a free stream buffer,
-        then into the batch's records."""
+    def _trace_stream(self, records: _Records, index: int, batch: int, start: int, stop: int) -> None:
+        """Photons [start, stop) of batch `batch` through all their bounces, in a free stream
+        buffer, then into the batch's records as stream `index`."""
         try:
             st = _FREE.pop()
         except IndexError:
             st = _Stream()
         n = stop - start
         st.rays = st.hits = st.kept = 0
+        st.skip_rays = st.skip_hits = st.skip_kept = 0
         st.sums[:] = 0.0
         st.embree_seconds = 0.0
         st.reserve(2 * n, n)
-        self.schedule.emit(start, stop, st.o, st.d, st.f, st.rng)
+        self.schedule.emit(batch, start, stop, st.o, st.d, st.f, st.rng)
         st.length[:n] = RAY_FAR
         s, e, bounce = 0, n, 0
         st.rays = n
@@ -460,16 +489,19 @@ class PhotonTracer:
                                        self.material_of, self.materials, bounce, self.bounces, self.centre,
                                        self.escape_radius, self.eps, st.sums)
             st.kept += kept
+            if bounce == 0 and self.indirect_only:
+                st.skip_rays, st.skip_hits, st.skip_kept = e, st.hits, st.kept
             s, e, st.rays = e, w, w
             bounce += 1
         records.add(index, st)
 
-    def _trace_batch(self, start: int, stop: int) -> PhotonBatch:
+    def _trace_batch(self, index: int) -> PhotonBatch:
+        start, stop = self.schedule.ids(index)
         n = stop - start
         bounds = self.stream_bounds(n)
         records = _Records(_SEGMENT_ARRAYS, _HIT_ARRAYS, int(n * self._per_photon) + 1024,
                            int(n * self._per_photon_hits) + 1024, len(bounds), self.threads + 2)
-        jobs = [(records, k, start + a, start + b) for k, (a, b) in enumerate(bounds)]
+        jobs = [(records, k, index, start + a, start + b) for k, (a, b) in enumerate(bounds)]
         if self._pool is None:
             for job in jobs:
                 self._trace_stream(*job)
@@ -485,6 +517,7 @@ class PhotonTracer:
             tr.truncated += sums[2]
             tr.embree_seconds += embree
         tr.photons += n
+        tr.emitted += self.schedule.emitted_flux * self.schedule.weight(index)
         tr.segments += batch.segment_count
         tr.hits += batch.hit_count
         self._per_photon = 1.05 * batch.segment_count / n + 0.01

@@ -15,7 +15,7 @@ ESTIMATORS = ["photon_map", "detp", "sphere_cache", "disc_index"]
 
 def _bake(scene, name, photons, radius, bounces=0, seed=0):
     settings = EstimatorSettings(k=2000) if name == "photon_map" else EstimatorSettings(radius=radius)
-    return compute(scene, BakeSettings(estimator=name, photons=photons, bounces=bounces, seed=seed,
+    return compute(scene, BakeSettings(estimator=name, photons=photons, bounces=bounces, seed=seed, direct="photons",
                                        estimator_settings=settings))
 
 

@@ -18,7 +18,7 @@ def _sun_scene(parts, res=32):
 def test_plate_edges_stay_lit_for_detp_and_halve_for_the_photon_map():
     sc = _sun_scene([("Plate", grid(2.0, 2.0, 4), None, True)])
     # k = 1000 of 200k photons: r_k ≈ 4 texels, so an edge texel's neighbourhood hangs half off the plate.
-    common = dict(photons=200_000, bounces=0)
+    common = dict(photons=200_000, bounces=0, direct="photons")
     detp = compute(sc, BakeSettings(estimator="disc_index", **common))
     pmap = compute(sc, BakeSettings(estimator="photon_map", estimator_settings=EstimatorSettings(k=1000), **common))
     i, j = detp.texels.pixel % 32, detp.texels.pixel // 32
@@ -37,7 +37,7 @@ def test_detp_does_not_pick_up_light_from_a_shelf_just_above():
     floor = grid(2.0, 2.0, 4)
     shelf = grid(1.0, 1.0, 2, z=0.04)
     sc = _sun_scene([("Floor", floor, None, True), ("Shelf", shelf, None, False)])
-    common = dict(photons=200_000, bounces=0)
+    common = dict(photons=200_000, bounces=0, direct="photons")
     detp = compute(sc, BakeSettings(estimator="disc_index", **common))
     pmap = compute(sc, BakeSettings(estimator="photon_map", estimator_settings=EstimatorSettings(k=200), **common))
     x = detp.texels.position

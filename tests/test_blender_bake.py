@@ -64,22 +64,27 @@ def cornell_reference(bpy):
     return blender_scene.cycles_bake(bpy.context.scene, names, resolution=32, samples=128)
 
 
-@pytest.mark.parametrize("name, mean_tol, rmse_tol", [("disc_index", 0.03, 0.12), ("photon_map", 0.05, 0.2)])
-def test_cornell_box_matches_cycles(cornell_reference, cornell, bpy, record_property, name, mean_tol, rmse_tol):
+@pytest.mark.parametrize("name, direct, mean_tol, rmse_tol", [
+    ("disc_index", "photons", 0.03, 0.12), ("photon_map", "photons", 0.05, 0.2),
+    ("disc_index", "sampled", 0.02, 0.08), ("photon_map", "sampled", 0.03, 0.1)])
+def test_cornell_box_matches_cycles(cornell_reference, cornell, bpy, record_property, name, direct, mean_tol,
+                                    rmse_tol):
     sc = export(bpy, resolution=32)
     names = [o.name for o in sc.objects]
-    r = compute(sc, BakeSettings(estimator=name, photons=2_000_000, estimator_settings=EstimatorSettings(k=100)))
+    r = compute(sc, BakeSettings(estimator=name, photons=2_000_000, direct=direct,
+                                 estimator_settings=EstimatorSettings(k=100)))
     # Compare where both bakers sample the same point: texels whose centre lies on the surface.
     ours = np.concatenate([r.images[n][r.centre_masks[n]] for n in names])
     theirs = np.concatenate([cornell_reference[n][r.centre_masks[n]] for n in names])
     rmse = relative_rmse(ours, theirs, np.ones(len(ours), bool))
     record_property("relative_rmse_vs_cycles", rmse)
-    print(f"{name} vs Cycles: mean {ours.mean() / theirs.mean() - 1:+.3%}, texel relative RMSE {rmse:.3f}")
+    print(f"{name} ({direct} direct) vs Cycles: mean {ours.mean() / theirs.mean() - 1:+.3%}, texel relative RMSE {rmse:.3f}")
     assert abs(ours.mean() / theirs.mean() - 1) < mean_tol
     assert rmse < rmse_tol
 
 
-def test_emissive_mesh_and_world_match_cycles(empty_blend, bpy):
+@pytest.mark.parametrize("direct", ["photons", "sampled"])
+def test_emissive_mesh_and_world_match_cycles(empty_blend, bpy, direct):
     """Calibration of the two emitters DESIGN.md says to check: a two-sided emissive plane and a
     constant world colour, against Cycles' direct-light bake of a receiver."""
     scene = empty_blend
@@ -95,7 +100,8 @@ def test_emissive_mesh_and_world_match_cycles(empty_blend, bpy):
                  material=principled(bpy, "Glow", base=(0, 0, 0), emission=(1, 1, 1), strength=2.0))
     sc = export(bpy, objects=["Receiver"], resolution=16)
     ref = blender_scene.cycles_bake(scene, ["Receiver"], resolution=16, samples=256, bounces=0)
-    r = compute(sc, BakeSettings(photons=1_000_000, bounces=0, estimator_settings=EstimatorSettings(k=400)))
+    r = compute(sc, BakeSettings(photons=1_000_000, bounces=0, direct=direct,
+                                 estimator_settings=EstimatorSettings(k=400)))
     m = r.centre_masks["Receiver"]
     ours, theirs = r.images["Receiver"][m], ref["Receiver"][m]
     assert np.allclose(ours.mean(axis=0), theirs.mean(axis=0), rtol=0.03)
@@ -156,8 +162,9 @@ LIGHTS = {
 }
 
 
+@pytest.mark.parametrize("direct", ["photons", "sampled"])
 @pytest.mark.parametrize("case", LIGHTS)
-def test_every_light_type_matches_cycles(empty_blend, bpy, case):
+def test_every_light_type_matches_cycles(empty_blend, bpy, case, direct):
     """Direct light on a receiver plane, ours against Cycles' bake: units and shapes per light type."""
     spec = dict(LIGHTS[case])
     kind = spec.pop("kind")
@@ -167,8 +174,13 @@ def test_every_light_type_matches_cycles(empty_blend, bpy, case):
     plane_object(bpy, "Receiver", 4.0, (0, 0, 0), material=principled(bpy, "Grey", base=(0.5, 0.5, 0.5)))
     sc = export(bpy, objects=["Receiver"], resolution=32)
     ref = blender_scene.cycles_bake(empty_blend, ["Receiver"], resolution=32, samples=128, bounces=0)["Receiver"]
-    r = compute(sc, BakeSettings(photons=1_000_000, bounces=0, estimator_settings=EstimatorSettings(radius_texels=1.0)))
+    r = compute(sc, BakeSettings(photons=1_000_000, bounces=0, direct=direct, direct_samples=64,
+                                 estimator_settings=EstimatorSettings(radius_texels=1.0)))
     m = r.centre_masks["Receiver"]
     ours, theirs = r.images["Receiver"][m], ref[m]
-    assert abs(ours.mean() / theirs.mean() - 1) < 0.03
-    assert relative_rmse(ours, theirs, np.ones(len(ours), bool)) < 0.12
+    rmse = relative_rmse(ours, theirs, np.ones(len(ours), bool))
+    print(f"{case} ({direct}): mean {ours.mean() / theirs.mean() - 1:+.3%}, texel relative RMSE {rmse:.3f}")
+    # Shadow rays have no disc blur and no photon noise: they match Cycles far more closely.
+    mean_tol, rmse_tol = (0.005, 0.03) if direct == "sampled" else (0.03, 0.12)
+    assert abs(ours.mean() / theirs.mean() - 1) < mean_tol
+    assert rmse < rmse_tol

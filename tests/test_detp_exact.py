@@ -118,7 +118,7 @@ def test_all_three_agree_on_a_real_bake_with_chart_borders():
     ball = (ball[0] + [0.0, 0.0, 0.6], ball[1], ball[2])
     sc = make_scene([("Plate", plate, 0.6, True), ("Ball", ball, 0.8, True)],
                     [PointLight("Lamp", np.array([0.5, 0.3, 1.5]), np.full(3, 50.0))], resolution=24)
-    values = {name: compute(sc, BakeSettings(estimator=name, photons=30_000, bounces=2, seed=4,
+    values = {name: compute(sc, BakeSettings(estimator=name, photons=30_000, bounces=2, seed=4, direct="photons",
                                              estimator_settings=EstimatorSettings(radius_texels=1.5)))
               for name in ("detp", "sphere_cache", "disc_index")}
     ref = values["detp"]

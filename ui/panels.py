@@ -36,6 +36,9 @@ class DETPBAKE_PT_photons(_Panel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         s = context.scene.detp_bake
+        layout.prop(s, "direct")
+        if s.direct == "sampled":
+            layout.prop(s, "direct_samples")
         layout.prop(s, "photons")
         layout.prop(s, "bounces")
         layout.prop(s, "seed")

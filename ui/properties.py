@@ -17,6 +17,15 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
                             description="Density estimator that turns photons into irradiance")
     photons: IntProperty(name="Photons", default=1_000_000, min=1, max=1_000_000_000, soft_min=10_000,
                          soft_max=50_000_000, description="Photons traced from the lights: more means less noise")
+    direct: EnumProperty(name="Direct Light", default="sampled",
+                         items=[("sampled", "Shadow Rays", "Direct light sampled with shadow rays at every texel; "
+                                 "photons carry indirect light only (sharp shadows, least noise)"),
+                                ("photons", "Photons", "Photons carry direct light too and the estimator sees "
+                                 "every segment (the paper's experiments)")],
+                         description="How direct light is found")
+    direct_samples: IntProperty(name="Shadow Rays", default=16, min=1, max=4096, soft_max=256,
+                                description="Shadow rays per texel for each light with extent (area, sphere, "
+                                            "sun disc, sky, emissive meshes); point lights need one")
     bounces: IntProperty(name="Bounces", default=-1, min=-1, max=1024, soft_max=16,
                          description="Diffuse bounces before a photon lands (-1: Cycles' Light Paths > Diffuse)")
     seed: IntProperty(name="Seed", default=0, min=0, description="Random seed: the same seed gives the same lightmaps")

@@ -1,0 +1,377 @@
+"""Direct light at every texel by sampling the lights with shadow rays (the first pass of the
+classic two-pass split; DESIGN.md §7).
+
+Direct light holds the hard shadows and most of the energy, and a density estimate blurs it over
+its disc. Sampled here, it has no blur at all: a point light needs one shadow ray per texel, a
+light with extent `samples` stratified rays (a Hammersley set, rotated per texel and light by a
+random offset so neighbouring texels do not share a pattern). The photons then carry only the
+indirect part (`PhotonTracer(indirect_only=True)`), which is smooth, so the estimators' discs cost
+little accuracy there.
+
+Units as everywhere in the core: irradiance E in W/m² (the bake stores E/π, Cycles' unit):
+- point/spot light of power P: intensity P/(4π) W/sr; with a radius, a sphere of that power,
+  sampled uniformly in the solid angle it subtends;
+- sun: `irradiance` W/m² at normal incidence, its disc sampled uniformly in solid angle;
+- area light: one-sided Lambertian of power P, radiance P/(πA), sampled uniformly over its area
+  (the area cancels: each sample adds P/π · cosθ·cosθ'/d²);
+- emissive triangles: both faces, radiance L; a triangle is picked in proportion to its power;
+- world colour L: cosine-weighted directions, π·L when nothing is in the way.
+
+Every light is sampled at every texel (no per-texel light selection yet). Texel chunks run on
+worker threads: the ray generation and the sums are compiled (`nogil`), the occlusion test is one
+embreex `run(query='OCCLUDED')` per chunk and light, which releases the GIL.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numba
+import numpy as np
+
+from .errors import BakeCancelled, BakeError
+from .lights import _spot_att
+from .sampling import (cone_lobe, cosine_hemisphere, in_frame, jit, orthonormal_basis, photon_rng, seed_key,
+                       uniform2, uniform_disc, uniform_triangle)
+from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
+
+POINT, SUN, AREA, MESH, WORLD = 0, 1, 2, 3, 4
+FAR = 1e37
+CHUNK = 2048  # texels per work item
+DEFAULT_SAMPLES = 16
+
+
+@dataclass
+class DirectLight:
+    """One light as the shadow-ray kernel reads it: `kind`, a float64 parameter row, `samples`
+    rays per texel, and for emissive meshes the triangle table."""
+    name: str
+    kind: int
+    params: np.ndarray
+    samples: int
+    tri_cdf: np.ndarray = None
+    tri_pos: np.ndarray = None
+    tri_normal: np.ndarray = None
+    tri_radiance: np.ndarray = None  # per triangle, radiance × area / probability (RGB)
+
+
+def _row(*parts) -> np.ndarray:
+    out = []
+    for p in parts:
+        out.extend(np.asarray(p, np.float64).ravel().tolist())
+    row = np.zeros(32)
+    row[:len(out)] = out
+    return row
+
+
+def direct_lights(scene: Scene, samples: int) -> list[DirectLight]:
+    """The scene's emitters in the kernel's form. Param rows (float64[32]):
+    POINT: position(3) intensity RGB(3) radius axis(3) cos_half smooth is_spot;
+    SUN: towards-sun direction(3) irradiance(3) cos_max;
+    AREA: matrix rows 0-2 (12) emitting normal(3) size_x size_y is_disc P/π RGB(3);
+    WORLD: radiance(3)."""
+    out = []
+    for light in scene.lights:
+        if isinstance(light, (PointLight, SpotLight)):
+            intensity = np.asarray(light.power, np.float64) / (4.0 * np.pi)
+            radius = float(light.radius)
+            if isinstance(light, SpotLight):
+                axis = np.asarray(light.direction, np.float64)
+                axis = axis / np.linalg.norm(axis)
+                half = 0.5 * min(float(light.spot_size), np.pi)
+                cos_half = np.cos(half)
+                spot = (axis, cos_half, (1.0 - cos_half) * float(light.blend), 1.0)
+            else:
+                spot = (np.zeros(3), -2.0, 0.0, 0.0)
+            out.append(DirectLight(light.name, POINT, _row(light.position, intensity, radius, *spot),
+                                   samples if radius > 0.0 else 1))
+        elif isinstance(light, SunLight):
+            d = np.asarray(light.direction, np.float64)
+            d = -d / np.linalg.norm(d)
+            cos_max = float(np.cos(0.5 * light.angle)) if light.angle > 0.0 else 1.0
+            out.append(DirectLight(light.name, SUN, _row(d, light.irradiance, cos_max),
+                                   samples if cos_max < 1.0 else 1))
+        elif isinstance(light, AreaLight):
+            m = np.asarray(light.matrix, np.float64)
+            xy = np.cross(m[:3, 0], m[:3, 1])
+            normal = -xy * np.sign(np.sum(xy * m[:3, 2]))  # faces local -Z, as lights.area_emitter
+            normal /= np.linalg.norm(normal)
+            shape = light.shape.upper()
+            sx = float(light.size_x)
+            sy = float(light.size_x if shape in ("SQUARE", "DISK") else light.size_y)
+            disc = 1.0 if shape in ("DISK", "ELLIPSE") else 0.0
+            out.append(DirectLight(light.name, AREA, _row(m[:3, :4], normal, sx, sy, disc,
+                                                          np.asarray(light.power, np.float64) / np.pi),
+                                   samples))
+        else:
+            raise BakeError(f"unsupported light {light!r}")
+    mesh = _mesh_light(scene, samples)
+    if mesh is not None:
+        out.append(mesh)
+    world = np.asarray(scene.world, np.float64)
+    if np.any(world != 0.0):
+        out.append(DirectLight("world", WORLD, _row(world), samples))
+    return out
+
+
+def _mesh_light(scene: Scene, samples: int) -> Optional[DirectLight]:
+    lum = np.abs(scene.emission).mean(axis=1)
+    tri = np.flatnonzero(lum > 0.0)
+    if tri.size == 0:
+        return None
+    p = scene.positions[tri].astype(np.float64)
+    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    keep = area > 0.0
+    tri, p, cross, area = tri[keep], p[keep], cross[keep], area[keep]
+    if tri.size == 0:
+        return None
+    normal = cross / (2.0 * area[:, None])
+    radiance = scene.emission[tri].astype(np.float64)
+    w = np.abs(radiance).mean(axis=1) * area
+    cdf = np.cumsum(w)
+    total = cdf[-1]
+    cdf /= total
+    per_pick = radiance * (area * total / w)[:, None]  # radiance × area / probability
+    return DirectLight("emissive meshes", MESH, np.zeros(32), samples, np.ascontiguousarray(cdf),
+                       np.ascontiguousarray(p), np.ascontiguousarray(normal), np.ascontiguousarray(per_pick))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _radical_inverse2(j):
+    """Van der Corput in base 2: the second coordinate of a Hammersley set."""
+    x = np.uint32(j)
+    x = ((x << np.uint32(16)) | (x >> np.uint32(16)))
+    x = ((x & np.uint32(0x55555555)) << np.uint32(1)) | ((x & np.uint32(0xAAAAAAAA)) >> np.uint32(1))
+    x = ((x & np.uint32(0x33333333)) << np.uint32(2)) | ((x & np.uint32(0xCCCCCCCC)) >> np.uint32(2))
+    x = ((x & np.uint32(0x0F0F0F0F)) << np.uint32(4)) | ((x & np.uint32(0xF0F0F0F0)) >> np.uint32(4))
+    x = ((x & np.uint32(0x00FF00FF)) << np.uint32(8)) | ((x & np.uint32(0xFF00FF00)) >> np.uint32(8))
+    return np.float64(x) * (1.0 / 4294967296.0)
+
+
+@jit
+def _shadow_rays(kind, prm, samples, key, a, b, pos, nrm, geo, eps,
+                 cdf, tpos, tnrm, trad, o, d, t, w, owner):
+    """Rays for texels a … b−1 and one light: origins `o` (offset along the geometric normal `geo`),
+    unit directions `d`, far limits `t`, and `w` the RGB irradiance each adds when unoccluded
+    (already divided by the sample count); `owner` the texel. Rays that cannot add anything
+    (light behind the surface, outside a spot cone) are left out. Returns the ray count."""
+    k = 0
+    inv_s = 1.0 / samples
+    last = cdf.shape[0] - 1
+    for i in range(a, b):
+        px, py, pz = pos[i, 0], pos[i, 1], pos[i, 2]
+        nx, ny, nz = nrm[i, 0], nrm[i, 1], nrm[i, 2]
+        gx, gy, gz = geo[i, 0], geo[i, 1], geo[i, 2]
+        ox, oy, oz = px + eps * gx, py + eps * gy, pz + eps * gz
+        state, r0, r1 = uniform2(photon_rng(key, i))
+        for j in range(samples):
+            u0 = (j + 0.5) * inv_s + r0
+            u0 -= math.floor(u0)
+            u1 = _radical_inverse2(j) + r1
+            u1 -= math.floor(u1)
+            w0 = w1 = w2 = 0.0
+            dx = dy = dz = 0.0
+            far = FAR
+            if kind == POINT:
+                cx, cy, cz = prm[0] - ox, prm[1] - oy, prm[2] - oz
+                d2 = cx * cx + cy * cy + cz * cz
+                dist = math.sqrt(d2)
+                if dist <= 0.0:
+                    continue
+                ax, ay, az = cx / dist, cy / dist, cz / dist  # towards the light's centre
+                att = 1.0
+                if prm[12] > 0.0:  # spot: the angle between its axis and the way to the texel
+                    att = _spot_att(-(ax * prm[7] + ay * prm[8] + az * prm[9]), prm[10], prm[11])
+                    if att <= 0.0:
+                        continue
+                radius = prm[6]
+                if radius > 0.0 and dist > radius:
+                    # A sphere: directions uniform in its cone, radiance P/(4π²r²) each.
+                    sin2 = radius * radius / d2
+                    cos_max = math.sqrt(max(0.0, 1.0 - sin2))
+                    lx, ly, lz = cone_lobe(cos_max, u0, u1)
+                    ts, ss = orthonormal_basis(ax, ay, az)
+                    dx, dy, dz = in_frame(lx, ly, lz, ts, ss, (ax, ay, az))
+                    cos_x = dx * nx + dy * ny + dz * nz
+                    if cos_x <= 0.0:
+                        continue
+                    # E = L·Ω·E[cos]; L·Ω = I/r² · (1 − cos_max)·2π/π = 2·I·(1 − cos_max)/r².
+                    scale = 2.0 * (1.0 - cos_max) / (radius * radius) * cos_x * att * inv_s
+                    # distance to the sphere along d (the near root)
+                    b_ = dx * cx + dy * cy + dz * cz
+                    disc = b_ * b_ - (d2 - radius * radius)
+                    far = b_ - math.sqrt(max(disc, 0.0))
+                else:
+                    dx, dy, dz = ax, ay, az
+                    cos_x = dx * nx + dy * ny + dz * nz
+                    if cos_x <= 0.0:
+                        continue
+                    scale = cos_x / d2 * att * inv_s
+                    far = dist
+                w0, w1, w2 = prm[3] * scale, prm[4] * scale, prm[5] * scale
+            elif kind == SUN:
+                if prm[6] < 1.0:
+                    ts, ss = orthonormal_basis(prm[0], prm[1], prm[2])
+                    lx, ly, lz = cone_lobe(prm[6], u0, u1)
+                    dx, dy, dz = in_frame(lx, ly, lz, ts, ss, (prm[0], prm[1], prm[2]))
+                else:
+                    dx, dy, dz = prm[0], prm[1], prm[2]
+                cos_x = dx * nx + dy * ny + dz * nz
+                if cos_x <= 0.0:
+                    continue
+                scale = cos_x * inv_s
+                w0, w1, w2 = prm[3] * scale, prm[4] * scale, prm[5] * scale
+            elif kind == AREA:
+                if prm[17] > 0.0:
+                    qx, qy = uniform_disc(u0, u1)
+                    lx, ly = 0.5 * prm[15] * qx, 0.5 * prm[16] * qy
+                else:
+                    lx, ly = (u0 - 0.5) * prm[15], (u1 - 0.5) * prm[16]
+                sx = prm[0] * lx + prm[1] * ly + prm[3] - ox
+                sy = prm[4] * lx + prm[5] * ly + prm[7] - oy
+                sz = prm[8] * lx + prm[9] * ly + prm[11] - oz
+                d2 = sx * sx + sy * sy + sz * sz
+                if d2 <= 0.0:
+                    continue
+                dist = math.sqrt(d2)
+                dx, dy, dz = sx / dist, sy / dist, sz / dist
+                cos_x = dx * nx + dy * ny + dz * nz
+                cos_l = -(dx * prm[12] + dy * prm[13] + dz * prm[14])
+                if cos_x <= 0.0 or cos_l <= 0.0:
+                    continue
+                scale = cos_x * cos_l / d2 * inv_s
+                w0, w1, w2 = prm[18] * scale, prm[19] * scale, prm[20] * scale
+                far = dist
+            elif kind == MESH:
+                lo, hi = 0, last
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if cdf[mid] <= u0:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                below = cdf[lo - 1] if lo > 0 else 0.0
+                v0 = (u0 - below) / max(cdf[lo] - below, 1e-300)
+                v0 = min(max(v0, 0.0), 0.999999999)
+                b0, b1, b2 = uniform_triangle(v0, u1)
+                sx = b0 * tpos[lo, 0, 0] + b1 * tpos[lo, 1, 0] + b2 * tpos[lo, 2, 0] - ox
+                sy = b0 * tpos[lo, 0, 1] + b1 * tpos[lo, 1, 1] + b2 * tpos[lo, 2, 1] - oy
+                sz = b0 * tpos[lo, 0, 2] + b1 * tpos[lo, 1, 2] + b2 * tpos[lo, 2, 2] - oz
+                d2 = sx * sx + sy * sy + sz * sz
+                if d2 <= 0.0:
+                    continue
+                dist = math.sqrt(d2)
+                dx, dy, dz = sx / dist, sy / dist, sz / dist
+                cos_x = dx * nx + dy * ny + dz * nz
+                cos_l = abs(dx * tnrm[lo, 0] + dy * tnrm[lo, 1] + dz * tnrm[lo, 2])
+                if cos_x <= 0.0 or cos_l <= 0.0:
+                    continue
+                scale = cos_x * cos_l / d2 * inv_s
+                w0, w1, w2 = trad[lo, 0] * scale, trad[lo, 1] * scale, trad[lo, 2] * scale
+                far = dist * (1.0 - 1e-4) - eps  # stop short of the emitting triangle itself
+            else:  # WORLD: cosine-weighted, π·L each
+                dx, dy, dz = cosine_hemisphere(nx, ny, nz, u0, u1)
+                if dx * gx + dy * gy + dz * gz <= 0.0:
+                    continue
+                scale = math.pi * inv_s
+                w0, w1, w2 = prm[0] * scale, prm[1] * scale, prm[2] * scale
+            if far <= 0.0:
+                continue
+            o[k, 0], o[k, 1], o[k, 2] = ox, oy, oz
+            d[k, 0], d[k, 1], d[k, 2] = dx, dy, dz
+            t[k] = far
+            w[k, 0], w[k, 1], w[k, 2] = w0, w1, w2
+            owner[k] = i
+            k += 1
+    return k
+
+
+@jit
+def _gather(n, occluded, w, owner, out):
+    for k in range(n):
+        if occluded[k] < 0:  # embreex: −1 where nothing is in the way
+            i = owner[k]
+            out[i, 0] += w[k, 0]
+            out[i, 1] += w[k, 1]
+            out[i, 2] += w[k, 2]
+
+
+def geometric_normals(scene: Scene, triangle: np.ndarray, towards: np.ndarray) -> np.ndarray:
+    """Unit face normals of `triangle`, flipped to the side of the shading normals `towards`."""
+    p = scene.positions[triangle].astype(np.float64)
+    g = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+    flip = np.sum(g * towards, axis=1) < 0.0
+    g[flip] *= -1.0
+    return g
+
+
+def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPLES, seed: int = 0,
+                      threads: int = 1, progress: Optional[Callable[[float], None]] = None,
+                      cancel: Optional[Callable[[], bool]] = None) -> tuple[np.ndarray, dict]:
+    """Direct irradiance E (N, 3) W/m² at every texel, and counters for report.json.
+
+    `caster` is the `photons.RayCaster` of the scene's triangles (shared with the photon tracer).
+    Deterministic for a seed whatever the thread count: every texel's numbers come from its own
+    stream, and each texel is summed by one chunk."""
+    t0 = time.perf_counter()
+    lights = direct_lights(scene, int(samples))
+    n = len(texels)
+    out = np.zeros((n, 3))
+    if n == 0 or not lights:
+        return out, {"lights": len(lights), "rays": 0, "seconds": 0.0}
+    pos = np.ascontiguousarray(texels.position, np.float64)
+    nrm = np.ascontiguousarray(texels.normal, np.float64)
+    geo = geometric_normals(scene, texels.triangle, nrm)
+    centre, radius = scene.bounds()
+    eps = max(1e-5 * radius, 1e-6)
+    empty_cdf = np.zeros(1)
+    empty_tri = np.zeros((1, 3, 3))
+    empty_vec = np.zeros((1, 3))
+    chunks = [(a, min(n, a + CHUNK)) for a in range(0, n, CHUNK)]
+    rays = [0] * len(chunks)
+    done = [0]
+    lock = threading.Lock()
+
+    def run(index):
+        if cancel is not None and cancel():
+            raise BakeCancelled()
+        a, b = chunks[index]
+        most = (b - a) * max(l.samples for l in lights)
+        o = np.empty((most, 3), np.float32)
+        d = np.empty((most, 3), np.float32)
+        t = np.empty(most, np.float32)
+        w = np.empty((most, 3))
+        owner = np.empty(most, np.int64)
+        for li, light in enumerate(lights):
+            key = seed_key(seed * 7919 + 1000003 * (li + 1))
+            mesh = light.kind == MESH
+            k = _shadow_rays(light.kind, light.params, light.samples, key, a, b, pos, nrm, geo, eps,
+                             light.tri_cdf if mesh else empty_cdf, light.tri_pos if mesh else empty_tri,
+                             light.tri_normal if mesh else empty_vec, light.tri_radiance if mesh else empty_vec,
+                             o, d, t, w, owner)
+            if k == 0:
+                continue
+            occluded = caster.occluded(o[:k], d[:k], t[:k])
+            _gather(k, occluded, w, owner, out)
+            rays[index] += k
+        with lock:
+            done[0] += 1
+            fraction = done[0] / len(chunks)
+        if progress is not None:
+            progress(fraction)
+
+    if threads > 1 and len(chunks) > 1:
+        with ThreadPoolExecutor(threads) as pool:
+            for f in [pool.submit(run, i) for i in range(len(chunks))]:
+                f.result()
+    else:
+        for i in range(len(chunks)):
+            run(i)
+    return out, {"lights": len(lights), "samples": int(samples), "rays": int(sum(rays)),
+                 "seconds": time.perf_counter() - t0}

@@ -1,0 +1,153 @@
+"""Direct light by shadow rays (`--direct sampled`) against closed-form irradiance (DESIGN.md §4),
+and against the photons' own estimate of the same light."""
+import numpy as np
+import pytest
+
+from detp_bake.bake import BakeSettings, compute
+from detp_bake.direct import direct_irradiance
+from detp_bake.estimators import EstimatorSettings
+from detp_bake.photons import RayCaster
+from detp_bake.scene import AreaLight, PointLight, SpotLight, SunLight
+from detp_bake.texels import rasterise
+from synthetic import grid, make_scene, uv_sphere
+
+
+def _direct(scene, samples=16, seed=0, threads=1):
+    texels = rasterise(scene)
+    e, info = direct_irradiance(scene, texels, RayCaster(scene.positions), samples, seed, threads)
+    return texels, e, info
+
+
+def test_point_light_over_a_plane_is_exact():
+    """E(ρ) = I·h/(h²+ρ²)^{3/2}, I = P/(4π): one shadow ray per texel, no noise at all."""
+    h, power = 1.0, 100.0
+    sc = make_scene([("Plane", grid(4.0, 4.0, 8), 0.5, True)],
+                    [PointLight("Lamp", np.array([0.0, 0.0, h]), np.full(3, power))], resolution=32)
+    texels, e, info = _direct(sc)
+    x = texels.position
+    rho2 = x[:, 0] ** 2 + x[:, 1] ** 2
+    expected = power / (4 * np.pi) * h / (h * h + rho2) ** 1.5
+    assert np.abs(e[:, 0] / expected - 1).max() < 0.01
+    assert info["rays"] == len(texels)  # exactly one ray each
+
+
+def test_sun_on_a_plane_and_its_shadow():
+    """A tilted sun of strength S gives S·cosθ on an open plate (within 0.5 %), and nothing under
+    an opaque square held above it, with a sharp shadow edge where the geometry puts it."""
+    s, tilt = 3.0, np.radians(30)
+    sun = SunLight("Sun", np.array([0.0, np.sin(tilt), -np.cos(tilt)]), np.full(3, s))
+    blocker = grid(0.6, 0.6, 1, z=0.5)
+    sc = make_scene([("Plate", grid(4.0, 4.0, 4), 0.5, True), ("Blocker", blocker, 0.5, False)],
+                    [sun], resolution=64)
+    texels, e, _ = _direct(sc)
+    x = texels.position[:, :2]
+    # Light travels towards +y as it falls: the shadow is the square shifted by 0.5·tan(tilt) to +y.
+    shift = 0.5 * np.tan(tilt)
+    inside = (np.abs(x[:, 0]) < 0.25) & (np.abs(x[:, 1] - shift) < 0.25)
+    outside = (np.abs(x[:, 0]) > 0.4) | (np.abs(x[:, 1] - shift) > 0.4)
+    assert np.allclose(e[outside, 0], s * np.cos(tilt), rtol=0.005)
+    assert np.all(e[inside] == 0.0)
+
+
+def test_coaxial_disc_light():
+    """A Lambertian disc of radius R and power P at height h, facing down: on its axis
+    E = π·L·R²/(R²+h²) with L = P/(π·πR²). 64 stratified samples: within 1 %."""
+    radius, h, power = 0.5, 1.0, 80.0
+    m = np.eye(4)
+    m[2, 3] = h  # local −Z is world −Z: it faces the plane
+    light = AreaLight("Disc", m, "DISK", 2 * radius, 2 * radius, np.full(3, power))
+    sc = make_scene([("Plane", grid(0.2, 0.2, 2), 0.5, True)], [light], resolution=8)
+    texels, e, _ = _direct(sc, samples=64)
+    radiance = power / (np.pi * np.pi * radius ** 2)
+    # Texels sit within 0.1 m of the axis; E varies by < 0.5 % over that, so take each one's exact value.
+    rho2 = np.sum(texels.position[:, :2] ** 2, axis=1)
+    exact = [_disc_irradiance(radiance, radius, h, np.sqrt(r2)) for r2 in rho2]
+    assert np.allclose(e[:, 0], exact, rtol=0.01)
+    assert abs(e[:, 0].mean() / np.mean(exact) - 1) < 0.003
+    on_axis = np.pi * radiance * radius ** 2 / (radius ** 2 + h ** 2)
+    assert abs(_disc_irradiance(radiance, radius, h, 0.0) / on_axis - 1) < 1e-3  # the quadrature itself
+
+
+def _disc_irradiance(radiance, radius, h, rho, n=400):
+    """E at distance ρ off the axis of a facing Lambertian disc, by midpoint quadrature."""
+    r = (np.arange(n) + 0.5) / n * radius
+    phi = (np.arange(n) + 0.5) / n * 2 * np.pi
+    rr, pp = np.meshgrid(r, phi)
+    dx, dy = rr * np.cos(pp) - rho, rr * np.sin(pp)
+    d2 = dx * dx + dy * dy + h * h
+    integrand = radiance * h * h / d2 ** 2 * rr
+    return float(integrand.sum() * (radius / n) * (2 * np.pi / n))
+
+
+def test_constant_world_on_an_open_plane():
+    """A sky of radiance L over an open plane: E = π·L (within 1 %)."""
+    sc = make_scene([("Plane", grid(2.0, 2.0, 2), 0.5, True)], [], world=(0.2, 0.4, 0.6), resolution=16)
+    texels, e, _ = _direct(sc, samples=64)
+    assert np.allclose(e.mean(axis=0), np.pi * np.array([0.2, 0.4, 0.6]), rtol=0.01)
+    assert np.allclose(e, np.pi * np.array([0.2, 0.4, 0.6]), rtol=1e-6)  # nothing blocks: every ray counts
+
+
+def test_spot_cone_and_point_sphere_limits():
+    """A spot's cone cuts the light at the angle Blender's spot size says; a point light with a
+    radius is a sphere of the same power, which from afar is the point light."""
+    spot = SpotLight("Spot", np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0]), np.full(3, 100.0),
+                     np.radians(60), 0.0)
+    sc = make_scene([("Plane", grid(4.0, 4.0, 4), 0.5, True)], [spot], resolution=32)
+    texels, e, _ = _direct(sc)
+    rho = np.linalg.norm(texels.position[:, :2], axis=1)
+    edge = np.tan(np.radians(30))
+    assert np.all(e[rho > edge + 0.05] == 0.0)
+    assert np.allclose(e[rho < edge - 0.05, 0], 100 / (4 * np.pi) / (1 + rho[rho < edge - 0.05] ** 2) ** 1.5,
+                       rtol=1e-3)
+    far = make_scene([("Plane", grid(2.0, 2.0, 2), 0.5, True)],
+                     [PointLight("Ball", np.array([0.0, 0.0, 5.0]), np.full(3, 100.0), radius=0.3)], resolution=8)
+    _, e_sphere, _ = _direct(far, samples=64)
+    far.lights[0].radius = 0.0
+    _, e_point, _ = _direct(far)
+    assert np.allclose(e_sphere, e_point, rtol=0.01)
+
+
+def test_emissive_triangles_match_the_photons():
+    """A two-sided emissive square above a floor: the shadow-ray estimate and the photons'
+    (DETP, direct only) agree in the mean within 1 %."""
+    floor = grid(2.0, 2.0, 2)
+    lamp = grid(0.5, 0.5, 1, z=0.8, flip=True)
+    sc = make_scene([("Floor", floor, 0.5, True), ("Lamp", lamp, 0.0, False)], [], resolution=32)
+    sc.emission[sc.object_named("Lamp").triangles] = 3.0
+    sampled = compute(sc, BakeSettings(photons=2000, bounces=0, direct_samples=32))
+    photons = compute(sc, BakeSettings(photons=2_000_000, bounces=0, direct="photons",
+                                       estimator_settings=EstimatorSettings(radius=0.1)))
+    assert abs(sampled.value.mean() / photons.value.mean() - 1) < 0.01
+
+
+def test_sampled_and_photon_direct_agree_in_a_closed_sphere():
+    """Point source Φ in a closed sphere of albedo ρ, 4 bounces: the mean E is Φ/(4πR²)·Σ_{k≤4} ρ^k
+    whether direct light is sampled or carried by photons (within 1 %)."""
+    radius, rho, power, bounces = 1.0, 0.5, 100.0, 4
+    sc = make_scene([("Sphere", uv_sphere(radius, 24, 48, inward=True), rho, True)],
+                    [PointLight("Lamp", np.zeros(3), np.full(3, power))], resolution=48)
+    expected = power / (4 * np.pi * radius ** 2) * sum(rho ** k for k in range(bounces + 1))
+    for direct in ("sampled", "photons"):
+        r = compute(sc, BakeSettings(photons=1_000_000, bounces=bounces, direct=direct,
+                                     estimator_settings=EstimatorSettings(radius=0.15)))
+        mean = np.sum(r.value[:, 0] * np.pi * r.texels.area) / np.sum(r.texels.area)
+        assert abs(mean / expected - 1) < 0.01, direct
+
+
+def test_direct_light_is_the_same_on_any_thread_count():
+    area = AreaLight("Panel", np.eye(4) + np.diag([0, 0, 0, 0]), "RECTANGLE", 0.5, 0.3, np.full(3, 40.0))
+    area.matrix[2, 3] = 1.0
+    sc = make_scene([("Plane", grid(2.0, 2.0, 2), 0.5, True), ("Block", grid(0.4, 0.4, 1, z=0.4), 0.5, False)],
+                    [area], world=(0.1, 0.1, 0.1), resolution=96)
+    _, one, _ = _direct(sc, seed=3, threads=1)
+    _, two, _ = _direct(sc, seed=3, threads=2)
+    _, other, _ = _direct(sc, seed=4, threads=2)
+    assert np.array_equal(one, two)
+    assert not np.array_equal(one, other)
+
+
+@pytest.mark.parametrize("setting, value", [("direct", "rays"), ("direct_samples", 0), ("direct_samples", 10 ** 6)])
+def test_bad_direct_settings_are_refused(setting, value):
+    from detp_bake.errors import BakeError
+    with pytest.raises(BakeError, match=setting):
+        BakeSettings(**{setting: value}).validate()
