@@ -17,22 +17,29 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from . import __version__, estimators, images, texels as texels_mod
+from . import __version__, denoise as denoise_mod, direct as direct_mod, estimators, images, texels as texels_mod
 from .errors import BakeCancelled, BakeError
+from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
-from .photons import PhotonTracer, TraceStats
+from .photons import PhotonTracer, RayCaster, TraceStats
 from .scene import Scene
 
 MAX_PHOTONS = 1_000_000_000
 MAX_RESOLUTION = 16384
 MAX_BOUNCES = 1024
 HIT_BYTES = 52  # one stored photon-map hit: position, direction, flux, normal (float32), triangle
+DIRECT_MODES = ("sampled", "photons")
+MAX_DIRECT_SAMPLES = 4096
 
 
 @dataclass
 class BakeSettings:
     estimator: str = "disc_index"
     photons: int = 1_000_000
+    # sampled: direct light by shadow rays at every texel, the estimator sees indirect light only;
+    # photons: the estimator sees every segment (the paper's experiments).
+    direct: str = "sampled"
+    direct_samples: int = direct_mod.DEFAULT_SAMPLES  # shadow rays per texel and light with extent
     bounces: Optional[int] = None  # None: the scene's own Cycles diffuse bounces
     seed: int = 0
     resolution: int = 128  # default per-object lightmap size (objects may override)
@@ -42,6 +49,12 @@ class BakeSettings:
     threads: int = 0  # 0: all cores
     batch_size: int = 100_000
     memory_budget_mb: int = 0  # 0: no limit; the photon map keeps every hit (DETP streams)
+    # Stop tracing early (photons is then the most to trace): once every lightmap's relative noise
+    # is at most target_noise per cent, or before time_limit seconds of tracing and estimating.
+    target_noise: float = 0.0
+    time_limit: float = 0.0
+    denoise: bool = True  # OIDN on every lightmap (chart-aware; denoise.py), when pyoidn is installed
+    keep_raw: bool = False  # also write the lightmaps as they were before denoising (<name>.<estimator>.raw.exr)
     estimator_settings: EstimatorSettings = field(default_factory=EstimatorSettings)
 
     def validate(self) -> None:
@@ -52,6 +65,11 @@ class BakeSettings:
             bad("estimator", self.estimator, f"choose one of {', '.join(estimators.names())}")
         if not isinstance(self.photons, (int, np.integer)) or not 1 <= self.photons <= MAX_PHOTONS:
             bad("photons", self.photons, f"must be between 1 and {MAX_PHOTONS:,}")
+        if self.direct not in DIRECT_MODES:
+            bad("direct", self.direct, f"choose one of {', '.join(DIRECT_MODES)}")
+        if not isinstance(self.direct_samples, (int, np.integer)) or \
+                not 1 <= self.direct_samples <= MAX_DIRECT_SAMPLES:
+            bad("direct_samples", self.direct_samples, f"must be between 1 and {MAX_DIRECT_SAMPLES}")
         if self.bounces is not None and not 0 <= self.bounces <= MAX_BOUNCES:
             bad("bounces", self.bounces, f"must be between 0 and {MAX_BOUNCES}")
         if not 1 <= self.resolution <= MAX_RESOLUTION:
@@ -65,6 +83,13 @@ class BakeSettings:
             bad("threads", self.threads, "must be 0 (all cores) or more")
         if self.batch_size < 1:
             bad("batch_size", self.batch_size, "must be positive")
+        if not (np.isfinite(self.target_noise) and 0.0 <= self.target_noise <= 100.0):
+            bad("target_noise", self.target_noise, "must be a percentage between 0 (off) and 100")
+        if self.target_noise and self.estimator == "photon_map":
+            bad("target_noise", self.target_noise, "the photon map's noise does not fall with more photons "
+                "(about 1/sqrt(k-1)): use a DETP estimator, or raise k")
+        if not (np.isfinite(self.time_limit) and self.time_limit >= 0.0):
+            bad("time_limit", self.time_limit, "must be 0 (off) or a number of seconds")
         if self.memory_budget_mb < 0:
             bad("memory_budget_mb", self.memory_budget_mb, "must be 0 (no limit) or more")
         es = self.estimator_settings
@@ -92,7 +117,7 @@ class Progress:
 class BakeResult:
     settings: BakeSettings
     bounces: int
-    images: dict  # object name -> (H, W, 3) float32 E/π, dilated, row 0 at the bottom
+    images: dict  # object name -> (H, W, 3) float32 E/π, denoised (if asked) and dilated, row 0 at the bottom
     masks: dict  # object name -> (H, W) bool, texels covered by the object's UVs
     centre_masks: dict  # object name -> (H, W) bool, texels whose centre lies on a UV triangle
     texels: texels_mod.TexelSet
@@ -101,6 +126,12 @@ class BakeResult:
     counters: dict
     seconds: dict
     files: dict = field(default_factory=dict)  # object name -> [paths]
+    direct: dict = field(default_factory=dict)  # how direct light was found (report.json)
+    noise: dict = field(default_factory=dict)  # object name -> relative noise of its lightmap
+    raw_images: dict = field(default_factory=dict)  # object name -> image before denoising (when denoised)
+    warnings: list = field(default_factory=list)
+    stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit
+    share: float = 1.0  # the share of the photons traced (less than 1 when stopped early)
 
     def report(self) -> dict:
         st = self.stats
@@ -120,6 +151,11 @@ class BakeResult:
             "flux": {"emitted": st.emitted.tolist(), "absorbed": st.absorbed.tolist(),
                      "escaped": st.escaped.tolist(), "truncated": st.truncated.tolist()},
             "estimator": {"name": self.settings.estimator, **self.counters},
+            "direct": self.direct,
+            "noise": {name: round(100.0 * v, 3) for name, v in self.noise.items()},  # per cent
+            "stopped_by": self.stopped_by,
+            "denoised": bool(self.raw_images),
+            "warnings": list(self.warnings),
             "seconds": self.seconds,
         }
 
@@ -148,15 +184,27 @@ def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional
     scene.check()
     report = progress or (lambda p: None)
     cancelled = _cancel_fn(cancel)
+    t_start = time.perf_counter()  # the time limit counts the whole bake
     bounces = scene.default_bounces if settings.bounces is None else int(settings.bounces)
     for obj in scene.objects:
         if obj.bake and obj.resolution <= 0:
             obj.resolution = settings.resolution
+    sampled = settings.direct == "sampled"
+    caster = RayCaster(scene.positions)
     tracer = PhotonTracer(scene, settings.photons, bounces, settings.seed,
-                          settings.batch_size, settings.threads)
+                          settings.batch_size, settings.threads, indirect_only=sampled, caster=caster)
     t0 = time.perf_counter()
     texels = texels_mod.rasterise(scene)
     rasterise_seconds = time.perf_counter() - t0
+    direct_e, direct_info = None, {"mode": settings.direct}
+    if sampled:
+        def direct_progress(fraction):
+            if cancelled():
+                raise BakeCancelled()
+            report(Progress("direct", fraction, f"Direct light {100 * fraction:.0f} %"))
+        direct_e, info = direct_mod.direct_irradiance(scene, texels, caster, settings.direct_samples,
+                                                      settings.seed, tracer.threads, direct_progress, cancelled)
+        direct_info.update(info)
 
     def estimate_progress(fraction):
         if cancelled():
@@ -164,12 +212,16 @@ def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional
         report(Progress("estimate", fraction, f"Estimating {100 * fraction:.0f} %"))
 
     mean_albedo = float(np.clip(scene.albedo.mean(), 0.0, 0.999)) if scene.triangle_count else 0.0
-    expected_segments = int(tracer.photons * sum(mean_albedo ** b for b in range(min(bounces, 64) + 1)))
+    first = 1 if sampled else 0  # the first flight is direct light, left out when sampled
+    expected_segments = int(tracer.photons * sum(mean_albedo ** b for b in range(first, min(bounces, 64) + 1)))
     clearance = None
+    t0 = time.perf_counter()
     if any(name != "photon_map" for name in names):
+        report(Progress("prepare", 0.0, "Measuring disc clearance"))
         from .estimators.discs import SLAB, disc_radius
         radius = disc_radius(texels, settings.estimator_settings)
         clearance = texels_mod.tangent_clearance(texels, scene.positions, radius, 0.5 * SLAB * radius)
+    clearance_seconds = time.perf_counter() - t0
     context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
                                  clearance=clearance)
     stored_mb = expected_segments * HIT_BYTES / 1e6
@@ -177,48 +229,113 @@ def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional
         raise BakeError(f"the photon map would keep about {stored_mb:,.0f} MB of photon hits, over the memory "
                         f"budget of {settings.memory_budget_mb:,} MB: use a DETP estimator (they stream "
                         "photons) or fewer photons")
-    runs = {name: estimators.create(name, texels, settings.estimator_settings, estimate_progress, context)
-            for name in names}
+    runs, build = {}, {}
+    for name in names:
+        report(Progress("prepare", 0.5, f"Preparing {name}"))
+        t1 = time.perf_counter()
+        runs[name] = estimators.create(name, texels, settings.estimator_settings, estimate_progress, context)
+        build[name] = time.perf_counter() - t1
     spent = {name: 0.0 for name in names}
+    # Noise from the spread between groups of batches, for the estimators that stream (a group
+    # closes once an estimator has consumed everything it was given).
+    noise = {name: BatchNoise(len(texels)) for name, est in runs.items() if est.streaming}
+    since = {name: 0 for name in noise}
+    primary = names[0]
     total = tracer.photons
+    stopped_by = "photons"
+    current = {}
     for batch in tracer.batches(cancelled):
+        t_batch = time.perf_counter()
         for name, est in runs.items():
             t1 = time.perf_counter()
             est.add(batch)
+            since.setdefault(name, 0)
+            since[name] += batch.segment_count
+            if name in noise and since[name] >= min(est.group_segments, expected_segments // 16):
+                noise[name].update(est.finish().irradiance, tracer.share)
+                since[name] = 0
             spent[name] += time.perf_counter() - t1
         done = tracer.stats.photons
-        report(Progress("trace", done / total, f"Tracing {_si(done)}/{_si(total)} photons"))
+        message = f"Tracing {_si(done)}/{_si(total)} photons"
+        if primary in noise and noise[primary].groups >= 2:
+            direct_now = 0.0 if direct_e is None else direct_e
+            current = noise[primary].relative(texels.lightmaps, direct_now + noise[primary].previous[:, None] /
+                                              max(tracer.share, 1e-300))
+            message += f" · noise {100 * max(current.values(), default=0.0):.2g} %"
+        report(Progress("trace", done / total, message))
         if cancelled():
             raise BakeCancelled()
+        elapsed = time.perf_counter() - t_start
+        if settings.time_limit and elapsed + (time.perf_counter() - t_batch) > settings.time_limit:
+            stopped_by = "time_limit"
+            break
+        if settings.target_noise and noise.get(primary) is not None and noise[primary].groups >= MIN_GROUPS \
+                and max(current.values(), default=0.0) * 100 <= settings.target_noise:
+            stopped_by = "target_noise"
+            break
+    share = tracer.share
     estimate_progress(0.0)
     results = {}
     for name, est in runs.items():
         t1 = time.perf_counter()
         out = est.finish()
+        if name in noise and since.get(name, 0) > 0:
+            noise[name].update(out.irradiance, share)
+        if share < 1.0:  # stopped early: the batches so far stand for the whole bake
+            out.irradiance = out.irradiance / share
         spent[name] += time.perf_counter() - t1
-        seconds = {"rasterise": rasterise_seconds, "trace": tracer.stats.seconds, "estimate": spent[name]}
-        results[name] = _finish(replace(settings, estimator=name), bounces, texels, out, tracer, seconds)
+        seconds = {"rasterise": rasterise_seconds, "direct": direct_info.get("seconds", 0.0),
+                   "clearance": clearance_seconds, "build": build[name], "trace": tracer.stats.seconds,
+                   "estimate": spent[name]}
+        result = _finish(replace(settings, estimator=name), bounces, texels, out, tracer, seconds,
+                         direct_e, direct_info)
+        result.stopped_by = stopped_by
+        result.share = share
+        if name in noise:
+            result.noise = noise[name].relative(texels.lightmaps, result.value * np.pi)
+        elif name == "photon_map":  # DESIGN.md §2: about 1/√(k − 1) whatever the photon count
+            k = settings.estimator_settings.k
+            result.noise = {lm.name: 1.0 / np.sqrt(k - 1) for lm in texels.lightmaps}
+        results[name] = result
     return results
 
 
-def _finish(settings, bounces, texels, est, tracer, seconds) -> BakeResult:
+def _finish(settings, bounces, texels, est, tracer, seconds, direct_e=None, direct_info=None) -> BakeResult:
     """E/π per texel (Cycles' Diffuse bake unit, DIRECT+INDIRECT, no COLOR), as dilated images."""
-    value = est.irradiance / np.pi
-    result_images, masks, centre_masks = {}, {}, {}
+    irradiance = est.irradiance if direct_e is None else est.irradiance + direct_e
+    value = irradiance / np.pi
+    result_images, raw_images, masks, centre_masks = {}, {}, {}, {}
+    warnings = []
+    denoise = settings.denoise and denoise_mod.available()
+    if settings.denoise and not denoise:
+        warnings.append("lightmaps not denoised: the pyoidn package is not installed")
+    t0 = time.perf_counter()
     for lm in texels.lightmaps:
         pixel = texels.pixel[lm.texels]
         img, mask = texels_mod.to_image(value[lm.texels], lm, pixel)
-        result_images[lm.name] = texels_mod.dilate(img, mask, settings.margin)
+        raw = texels_mod.dilate(img, mask, settings.margin)
+        if denoise:
+            raw_images[lm.name] = raw
+            result_images[lm.name] = denoise_mod.denoise_lightmap(img, mask, margin=settings.margin)
+        else:
+            result_images[lm.name] = raw
         masks[lm.name] = mask
         centre_masks[lm.name] = np.zeros_like(mask)
         centre_masks[lm.name].flat[pixel[texels.centre_inside[lm.texels]]] = True
+    if denoise:
+        seconds["denoise"] = time.perf_counter() - t0
     return BakeResult(settings, bounces, result_images, masks, centre_masks, texels, value, tracer.stats,
-                      est.counters, seconds)
+                      est.counters, seconds, direct=dict(direct_info or {}), raw_images=raw_images,
+                      warnings=warnings)
 
 
 def output_paths(result: BakeResult, out_dir: Path) -> dict:
-    return {name: [out_dir / f"{images.file_stem(name)}.{result.settings.estimator}.{fmt}"
-                   for fmt in result.settings.formats] for name in result.images}
+    out = {name: [out_dir / f"{images.file_stem(name)}.{result.settings.estimator}.{fmt}"
+                  for fmt in result.settings.formats] for name in result.images}
+    if result.settings.keep_raw and result.raw_images:
+        for name, paths in out.items():
+            paths.append(out_dir / f"{images.file_stem(name)}.{result.settings.estimator}.raw.exr")
+    return out
 
 
 def write(result: BakeResult, out_dir: str | os.PathLike,
@@ -236,10 +353,11 @@ def write(result: BakeResult, out_dir: str | os.PathLike,
             for target in targets:
                 fmt = target.suffix[1:]
                 tmp = target.with_name(f".{target.stem}.partial{target.suffix}")
+                picture = result.raw_images[name] if target.name.endswith(".raw.exr") else result.images[name]
                 if fmt == "exr":
-                    images.write_exr(tmp, result.images[name], half=result.settings.half)
+                    images.write_exr(tmp, picture, half=result.settings.half)
                 else:
-                    images.WRITERS[fmt](tmp, result.images[name])
+                    images.WRITERS[fmt](tmp, picture)
                 staged.append((tmp, target))
             report(Progress("write", (i + 1) / len(paths), f"Writing {name}"))
             if cancelled():

@@ -41,7 +41,18 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake (default: all visible meshes)")
     b.add_argument("--estimator", default="disc_index",
                    help=f"one of: {', '.join(estimator_names())} (default disc_index)")
-    b.add_argument("--photons", type=int, default=1_000_000, help="photons to trace (default 1M)")
+    b.add_argument("--photons", type=int, default=None,
+                   help="photons to trace (default 1M; with --target-noise or --time-limit, the most to trace, "
+                        "default 1G)")
+    b.add_argument("--target-noise", type=float, default=0.0, metavar="PERCENT",
+                   help="trace photons in batches until every lightmap's relative noise is at most this")
+    b.add_argument("--time-limit", type=float, default=0.0, metavar="SECONDS",
+                   help="stop tracing before the bake has run this long (the photons so far stand for all)")
+    b.add_argument("--direct", default="sampled", choices=bake_mod.DIRECT_MODES,
+                   help="sampled: direct light by shadow rays, photons carry indirect light only (default); "
+                        "photons: the estimator sees every segment (the paper's experiments)")
+    b.add_argument("--direct-samples", type=int, default=bake_mod.BakeSettings.direct_samples,
+                   help="shadow rays per texel for each light with extent (default %(default)s)")
     b.add_argument("--k", type=int, default=100, help="photon map neighbours (default 100)")
     b.add_argument("--radius-texels", type=float, default=1.5, help="DETP disc radius in texels (default 1.5)")
     b.add_argument("--radius", type=float, default=None, help="DETP disc radius in metres (overrides texels)")
@@ -58,6 +69,10 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--out", required=True, help="output folder")
     b.add_argument("--format", default="exr", help="comma-separated: exr,png (default exr)")
     b.add_argument("--half", action="store_true", help="write half-float EXR")
+    b.add_argument("--denoise", action=argparse.BooleanOptionalAction, default=True,
+                   help="denoise the lightmaps with OIDN (default on; needs the pyoidn package)")
+    b.add_argument("--keep-raw", action="store_true",
+                   help="also write each lightmap before denoising, as <object>.<estimator>.raw.exr")
     b.add_argument("--apply", action="store_true", help="wire the lightmaps into the materials")
     b.add_argument("--save", default=None, metavar="OUT.blend", help="save the baked .blend here")
 
@@ -65,11 +80,19 @@ def _bake_arguments(b, with_scene_path):
 def settings_from_args(args) -> bake_mod.BakeSettings:
     formats = tuple(f.strip().lower() for f in args.format.split(",") if f.strip())
     return bake_mod.BakeSettings(
-        estimator=args.estimator, photons=args.photons, bounces=args.bounces, seed=args.seed,
+        estimator=args.estimator, photons=_photons(args), bounces=args.bounces, seed=args.seed,
+        target_noise=args.target_noise, time_limit=args.time_limit, denoise=args.denoise, keep_raw=args.keep_raw,
+        direct=args.direct, direct_samples=args.direct_samples,
         resolution=args.resolution, margin=args.margin, formats=formats, half=args.half,
         threads=args.threads,
         estimator_settings=EstimatorSettings(k=args.k, radius_texels=args.radius_texels,
                                              radius=args.radius, q=args.q, kernel=args.kernel))
+
+
+def _photons(args) -> int:
+    if args.photons is not None:
+        return args.photons
+    return bake_mod.MAX_PHOTONS if (args.target_noise or args.time_limit) else bake_mod.BakeSettings.photons
 
 
 class StderrProgress:
@@ -147,11 +170,21 @@ def run_compare(args, bl_scene=None) -> int:
     return 0
 
 
+def _log_noise(result) -> None:
+    if result.stopped_by != "photons":
+        _log(f"stopped by {result.stopped_by.replace('_', ' ')} after {result.stats.photons:,} photons")
+    if result.noise:
+        worst = sorted(result.noise.items(), key=lambda kv: -kv[1])
+        _log("relative noise: " + ", ".join(f"{name} {100 * v:.2g} %" for name, v in worst[:8]) +
+             (f" (+{len(worst) - 8} more in report.json)" if len(worst) > 8 else ""))
+
+
 def run_bake(args, bl_scene=None) -> int:
     """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene)."""
     settings = settings_from_args(args)
     bpy, blender_scene, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
     result = bake_mod.bake(scene, settings, out_dir, StderrProgress(), export_seconds=export_seconds)
+    _log_noise(result)
     if args.apply:
         blender_scene.apply_all(bl_scene, result.files, args.uv_layer, settings.estimator)
     if args.save:

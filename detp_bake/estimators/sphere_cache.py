@@ -110,6 +110,7 @@ def _run(o, w, length, flux, eps, visit, edges, sc, sr, levels, radii,
 class SphereCache(Estimator):
     name = "sphere_cache"
     streaming = True
+    group_segments = STREAM_SEGMENTS
 
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)

@@ -1,0 +1,59 @@
+"""How noisy a lightmap is, read off the bake itself: the spread between independent batches.
+
+Every batch of photons is an unbiased estimate of its share of the bake (schedule.py), so a streaming
+estimator's sums after each group of batches, differenced, give independent estimates x_g of the
+indirect irradiance, each from a share w_g of the photons. Their variance falls as 1/w, so with
+W = Σ w_g and X = Σ w_g·x_g / W (the bake's own estimate), the variance of X at a texel is
+Σ w_g (x_g − X)² / ((G − 1)·W): no extra tracing, two running sums per texel. A lightmap's relative
+noise is the RMS of that standard deviation over its texels, over its mean irradiance (direct light
+included: that is what the user sees). Sampled direct light has its own, much smaller, noise, which
+this leaves out.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+MIN_GROUPS = 4  # groups needed before the estimate is trusted for stopping a bake
+
+
+class BatchNoise:
+    """Running per-texel sums of the group estimates of one estimator."""
+
+    def __init__(self, texel_count: int):
+        self.previous = np.zeros(texel_count)
+        self.weight = 0.0
+        self.sum_wx2 = np.zeros(texel_count)
+        self.groups = 0
+
+    def update(self, cumulative: np.ndarray, share: float) -> None:
+        """`cumulative`: the estimator's irradiance sums so far (N, 3); `share`: the share of the
+        bake traced so far (schedule.share)."""
+        lum = np.asarray(cumulative, np.float64).mean(axis=1)
+        w = share - self.weight
+        if w <= 0.0:
+            return
+        x = (lum - self.previous) / w
+        self.sum_wx2 += w * x * x
+        self.previous = lum
+        self.weight = share
+        self.groups += 1
+
+    def variance(self) -> np.ndarray:
+        """Per texel, the variance of the bake's estimate X (luminance); NaN before two groups."""
+        if self.groups < 2:
+            return np.full(len(self.previous), np.nan)
+        mean = self.previous / self.weight
+        spread = np.maximum(self.sum_wx2 - self.weight * mean * mean, 0.0)
+        return spread / ((self.groups - 1) * self.weight)
+
+    def relative(self, lightmaps, total: np.ndarray) -> dict:
+        """{object name: relative noise} of each lightmap; `total` (N, 3) is the full estimate
+        (direct + indirect) the noise is relative to."""
+        var = self.variance()
+        lum = np.asarray(total, np.float64).mean(axis=1)
+        out = {}
+        for lm in lightmaps:
+            sl = lm.texels
+            mean = float(lum[sl].mean()) if lm.count else 0.0
+            out[lm.name] = float(np.sqrt(np.mean(var[sl])) / mean) if mean > 0.0 else 0.0
+        return out

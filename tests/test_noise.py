@@ -1,0 +1,76 @@
+"""Noise read off the bake (spread between batches), baking to a noise target or a time limit, and
+the batch schedule that makes an early stop unbiased."""
+import numpy as np
+import pytest
+
+from detp_bake.bake import BakeSettings, compute
+from detp_bake.estimators import EstimatorSettings
+from detp_bake.lights import build_emitters
+from detp_bake.scene import PointLight, SunLight
+from detp_bake.schedule import BatchSchedule
+from synthetic import grid, make_scene, uv_sphere
+
+RADIUS, RHO, POWER, BOUNCES = 1.0, 0.5, 100.0, 4
+
+
+def _sphere():
+    sc = make_scene([("Sphere", uv_sphere(RADIUS, 24, 48, inward=True), RHO, True)],
+                    [PointLight("Lamp", np.zeros(3), np.full(3, POWER))], resolution=48)
+    exact = POWER / (4 * np.pi * RADIUS ** 2) * sum(RHO ** k for k in range(BOUNCES + 1)) / np.pi
+    return sc, exact
+
+
+@pytest.mark.parametrize("name", ["disc_index", "sphere_cache"])
+def test_reported_noise_matches_the_real_error(name):
+    """In a closed sphere (uniform irradiance, exact direct light) the texels' RMS error against the
+    closed form is the noise: the batch-spread estimate must agree with it within 25 %."""
+    sc, exact = _sphere()
+    r = compute(sc, BakeSettings(estimator=name, photons=600_000, bounces=BOUNCES, batch_size=50_000,
+                                 estimator_settings=EstimatorSettings(radius=0.08)))
+    real = np.sqrt(np.mean((r.value[:, 0] - exact) ** 2)) / exact
+    reported = r.noise["Sphere"]
+    assert 0.75 < reported / real < 1.25, (reported, real)
+
+
+def test_target_noise_stops_below_the_target_and_unbiased():
+    sc, exact = _sphere()
+    settings = BakeSettings(photons=20_000_000, bounces=BOUNCES, batch_size=50_000, target_noise=2.0,
+                            estimator_settings=EstimatorSettings(radius=0.08))
+    r = compute(sc, settings)
+    assert r.stopped_by == "target_noise"
+    assert r.noise["Sphere"] * 100 <= 2.0
+    assert r.stats.photons < 20_000_000 and r.share < 0.5
+    real = np.sqrt(np.mean((r.value[:, 0] - exact) ** 2)) / exact
+    assert real < 0.025  # the real error is at the target too
+    assert abs(np.mean(r.value[:, 0]) / exact - 1) < 0.01  # the batches so far stand for the whole
+
+
+def test_time_limit_stops_after_the_first_batch_when_already_spent():
+    sc, exact = _sphere()
+    r = compute(sc, BakeSettings(photons=5_000_000, bounces=BOUNCES, batch_size=100_000, time_limit=1e-6,
+                                 estimator_settings=EstimatorSettings(radius=0.08)))
+    assert r.stopped_by == "time_limit" and r.stats.photons == 100_000
+    assert abs(np.mean(r.value[:, 0]) / exact - 1) < 0.02
+
+
+def test_every_batch_shares_photons_between_lights_by_flux():
+    """Two lights, 1:3 in flux: every batch holds both in that ratio, and the flux the batches carry
+    adds up to exactly what the lights emit."""
+    plane = grid(2.0, 2.0, 2)
+    sc = make_scene([("Plane", plane, 0.5, True)],
+                    [PointLight("A", np.array([0, 0, 1.0]), np.full(3, 10.0)),
+                     SunLight("B", np.array([0, 0, -1.0]), np.full(3, 1.0))])
+    emitters = build_emitters(sc)
+    schedule = BatchSchedule(emitters, 10_500, seed=1, batch_size=1000)
+    assert schedule.count == 11
+    carried = np.zeros(3)
+    for b in range(schedule.count):
+        start, stop = schedule.ids(b)
+        _, _, flux = schedule.photons_of(b, start, stop)
+        carried += flux.sum(axis=0)
+    assert np.allclose(carried, schedule.emitted_flux, rtol=1e-9)
+    start, stop = schedule.ids(3)
+    _, _, flux = schedule.photons_of(3, start, stop)
+    per_light = [flux[:k].sum() for k in (schedule._full[0],)]
+    assert np.isclose(per_light[0] / flux.sum(), emitters[0].weight / sum(e.weight for e in emitters), rtol=1e-9)
+    assert schedule.share(3) == pytest.approx(3000 / 10_500)
