@@ -11,7 +11,8 @@ from ..detp_bake import bake, blender_scene, images
 from ..detp_bake.errors import BakeCancelled, BakeError
 from . import common
 
-PHASES = {"trace": (0.0, 0.9), "estimate": (0.9, 0.97), "write": (0.97, 1.0)}
+PHASES = {"direct": (0.0, 0.1), "prepare": (0.1, 0.15), "trace": (0.15, 0.9), "estimate": (0.9, 0.97),
+          "write": (0.97, 1.0)}
 
 
 class BakeJob:
@@ -103,8 +104,11 @@ class BakeJob:
         s.last_report = json.dumps({"estimator": r.settings.estimator, "photons": summary["photons"],
                                     "segments": summary["segments"], "objects": len(r.files),
                                     "seconds": summary["seconds"], "files": r.files,
+                                    "noise": summary["noise"], "stopped_by": summary["stopped_by"],
                                     "output_directory": self.out_dir})
         total = sum(v for k, v in r.seconds.items() if k != "rasterise")
+        for warning in r.warnings:
+            report({"WARNING"}, warning)
         report({"INFO"}, f"Baked {len(r.files)} lightmaps with {r.settings.estimator} in {total:.1f} s "
                          f"({summary['photons']:,} photons) to {self.out_dir}")
         return {"FINISHED"}

@@ -40,9 +40,12 @@ class DETPBAKE_PT_photons(_Panel, bpy.types.Panel):
         if s.direct == "sampled":
             layout.prop(s, "direct_samples")
         layout.prop(s, "photons")
+        layout.prop(s, "target_noise")
+        layout.prop(s, "time_limit")
         layout.prop(s, "bounces")
         layout.prop(s, "seed")
         layout.prop(s, "threads")
+        layout.prop(s, "denoise")
 
 
 class DETPBAKE_PT_estimator(_Panel, bpy.types.Panel):
@@ -126,7 +129,12 @@ class DETPBAKE_PT_stats(_Panel, bpy.types.Panel):
         col = layout.column(align=True)
         col.label(text=f"{r['estimator']}: {r['objects']} lightmaps")
         col.label(text=f"{r['photons']:,} photons, {r['segments']:,} segments")
-        for phase in ("export", "trace", "estimate", "write"):
+        if r.get("noise"):
+            worst = max(r["noise"], key=r["noise"].get)
+            col.label(text=f"Noise: {r['noise'][worst]:.2g} % at most ({worst})")
+        if r.get("stopped_by", "photons") != "photons":
+            col.label(text=f"Stopped by {r['stopped_by'].replace('_', ' ')}")
+        for phase in ("export", "direct", "build", "trace", "estimate", "denoise", "write"):
             if phase in r["seconds"]:
                 col.label(text=f"{phase.capitalize()}: {r['seconds'][phase]:.2f} s")
 

@@ -26,6 +26,15 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
     direct_samples: IntProperty(name="Shadow Rays", default=16, min=1, max=4096, soft_max=256,
                                 description="Shadow rays per texel for each light with extent (area, sphere, "
                                             "sun disc, sky, emissive meshes); point lights need one")
+    target_noise: FloatProperty(name="Noise Target", default=0.0, min=0.0, max=100.0, soft_max=10.0,
+                                subtype="PERCENTAGE",
+                                description="Stop tracing once every lightmap's relative noise is at most this "
+                                            "(0: off); Photons is then the most to trace")
+    time_limit: FloatProperty(name="Time Limit", default=0.0, min=0.0, soft_max=3600.0, subtype="TIME_ABSOLUTE",
+                              unit="TIME_ABSOLUTE",
+                              description="Stop tracing before the bake has run this many seconds (0: off)")
+    denoise: BoolProperty(name="Denoise", default=True,
+                          description="Denoise the lightmaps with Intel Open Image Denoise (chart-aware)")
     bounces: IntProperty(name="Bounces", default=-1, min=-1, max=1024, soft_max=16,
                          description="Diffuse bounces before a photon lands (-1: Cycles' Light Paths > Diffuse)")
     seed: IntProperty(name="Seed", default=0, min=0, description="Random seed: the same seed gives the same lightmaps")
