@@ -37,7 +37,9 @@ from .errors import BakeCancelled, BakeError
 from .lights import _spot_att
 from .sampling import (cone_lobe, cosine_hemisphere, in_frame, jit, orthonormal_basis, photon_rng, seed_key,
                        uniform2, uniform_disc, uniform_triangle)
+from .scattering import MAX_PASSES
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
+from .textures import opacity_at, surfaces
 
 POINT, SUN, AREA, MESH, WORLD = 0, 1, 2, 3, 4
 FAR = 1e37
@@ -301,6 +303,52 @@ def _gather(n, occluded, w, owner, out):
             out[i, 2] += w[k, 2]
 
 
+@jit
+def _gather_weighted(n, transmitted, w, owner, out):
+    for k in range(n):
+        i = owner[k]
+        out[i, 0] += w[k, 0] * transmitted[k]
+        out[i, 1] += w[k, 1] * transmitted[k]
+        out[i, 2] += w[k, 2] * transmitted[k]
+
+
+@jit
+def _opacities(prim, bu, bv, opacity, opacity_tex, tex_uvs, pixels, info):
+    out = np.zeros(prim.shape[0])
+    for k in range(prim.shape[0]):
+        if prim[k] >= 0:
+            out[k] = opacity_at(opacity, opacity_tex, tex_uvs, pixels, info, prim[k], np.float64(bu[k]),
+                                np.float64(bv[k]))
+    return out
+
+
+def transmittance(caster, srf, o: np.ndarray, d: np.ndarray, far: np.ndarray, eps: float) -> np.ndarray:
+    """The share of light that gets along each shadow ray through cut-out surfaces: the product of
+    (1 − opacity) over the surfaces it meets, found layer by layer (each pass traces only the
+    rays still going). Noise-free where a stochastic pass would be a coin toss."""
+    n = len(far)
+    out = np.ones(n)
+    o = np.array(o, np.float32)
+    left = np.array(far, np.float64)
+    active = np.arange(n)
+    for _ in range(MAX_PASSES):
+        if active.size == 0:
+            return out
+        tf = left[active].astype(np.float32)
+        r = caster.hits(np.ascontiguousarray(o[active]), np.ascontiguousarray(d[active]), tf)
+        alpha = _opacities(r["primID"], r["u"], r["v"], srf.opacity, srf.opacity_tex, srf.tex_uvs, srf.pixels,
+                           srf.info)
+        out[active] *= 1.0 - alpha
+        go = (r["primID"] >= 0) & (alpha < 1.0)
+        idx = active[go]
+        step = tf[go].astype(np.float64) + eps
+        o[idx] += (step[:, None] * d[idx]).astype(np.float32)
+        left[idx] -= step
+        active = idx[left[idx] > 0.0]
+    out[active] = 0.0  # past MAX_PASSES cut-outs: taken as blocked
+    return out
+
+
 def geometric_normals(scene: Scene, triangle: np.ndarray, towards: np.ndarray) -> np.ndarray:
     """Unit face normals of `triangle`, flipped to the side of the shading normals `towards`."""
     p = scene.positions[triangle].astype(np.float64)
@@ -330,6 +378,7 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     geo = geometric_normals(scene, texels.triangle, nrm)
     centre, radius = scene.bounds()
     eps = max(1e-5 * radius, 1e-6)
+    srf = surfaces(scene)
     empty_cdf = np.zeros(1)
     empty_tri = np.zeros((1, 3, 3))
     empty_vec = np.zeros((1, 3))
@@ -357,8 +406,10 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
                              o, d, t, w, owner)
             if k == 0:
                 continue
-            occluded = caster.occluded(o[:k], d[:k], t[:k])
-            _gather(k, occluded, w, owner, out)
+            if srf.cutout:
+                _gather_weighted(k, transmittance(caster, srf, o[:k], d[:k], t[:k], eps), w, owner, out)
+            else:
+                _gather(k, caster.occluded(o[:k], d[:k], t[:k]), w, owner, out)
             rays[index] += k
         with lock:
             done[0] += 1

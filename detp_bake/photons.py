@@ -23,7 +23,8 @@ import numpy as np
 from .errors import BakeCancelled
 from .lights import build_emitters
 from .schedule import BatchSchedule
-from .sampling import cosine_hemisphere, jit, uniform2
+from .textures import surfaces
+from .scattering import MAX_PASSES, RAY_FAR, bounce, material_table, pass_through
 from .scene import Scene
 
 
@@ -65,6 +66,8 @@ class TraceStats:
     truncated: np.ndarray = field(default_factory=lambda: np.zeros(3))
     seconds: float = 0.0
     embree_seconds: float = 0.0  # time in Embree calls, summed over the threads
+    alpha_passes: int = 0  # flights continued through a cut-out surface
+    alpha_cut: int = 0  # flights stopped because they passed MAX_PASSES cut-outs
 
 
 class RayCaster:
@@ -81,6 +84,11 @@ class RayCaster:
         # embreex builds the BVH on the first run: do it now, not in the first batch.
         self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), output=True)
 
+    def hits(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> dict:
+        """Closest hits with everything Embree reports (tfar, primID, Ng, u, v); `tfar` (float32)
+        holds the far limits and receives the hit distances in place."""
+        return self.scene.run(origins, dirs, dists=tfar, output=True)
+
     def intersect(self, origins: np.ndarray, dirs: np.ndarray, tfar: Optional[np.ndarray] = None):
         """Closest hit per ray of float32 (N, 3) arrays: (tfar, primID (-1 = miss), unnormalised
         geometric normal). A given float32 `tfar` holds each ray's far limit (1e37: none) and
@@ -93,106 +101,6 @@ class RayCaster:
         return self.scene.run(origins, dirs, dists=tfar, query="OCCLUDED")
 
 
-RAY_FAR = 1e37  # a ray's initial tfar: no limit
-
-
-@jit
-def _bounce(s, e, prim, ng, o, d, f, length, rng, hit_pos, hit_dir, hit_flux, hit_nrm, hit_tri, nh,
-            material_of, materials, bounce, max_bounces, centre, escape_radius, eps, sums):
-    """Rays s … e−1 of one stream's log after Embree: segment lengths (Embree wrote the hit
-    distances into `length`), hit records from `nh` on, and the Russian-roulette diffuse
-    reflection, whose survivors are appended to the log from e on, with their random states.
-    `materials` rows are (albedo RGB, survival probability q, albedo / q); `sums` rows gain the
-    absorbed, escaped and truncated flux. Returns (end of the log, hit count, segments of
-    positive length)."""
-    w = e
-    kept = 0
-    r2 = escape_radius * escape_radius
-    ab0 = ab1 = ab2 = es0 = es1 = es2 = tr0 = tr1 = tr2 = 0.0
-    for i in range(s, e):
-        j = i - s
-        ox, oy, oz = np.float64(o[i, 0]), np.float64(o[i, 1]), np.float64(o[i, 2])
-        dx, dy, dz = np.float64(d[i, 0]), np.float64(d[i, 1]), np.float64(d[i, 2])
-        f0, f1, f2 = np.float64(f[i, 0]), np.float64(f[i, 1]), np.float64(f[i, 2])
-        t = prim[j]
-        if t < 0:
-            # Escapes: the segment runs to the far side of a sphere around the scene.
-            cx, cy, cz = ox - centre[0], oy - centre[1], oz - centre[2]
-            b = dx * cx + dy * cy + dz * cz
-            disc = b * b - (cx * cx + cy * cy + cz * cz - r2)
-            te = -b + np.sqrt(disc) if disc > 0.0 else 0.0
-            length[i] = te if te > 0.0 else 0.0
-            kept += length[i] > 0.0
-            es0 += f0
-            es1 += f1
-            es2 += f2
-            continue
-        tf = np.float64(length[i])
-        kept += tf > 0.0
-        nx, ny, nz = np.float64(ng[j, 0]), np.float64(ng[j, 1]), np.float64(ng[j, 2])
-        ln = np.sqrt(nx * nx + ny * ny + nz * nz)
-        if ln > 0.0:
-            inv = 1.0 / ln
-            nx, ny, nz = nx * inv, ny * inv, nz * inv
-        if nx * dx + ny * dy + nz * dz > 0.0:
-            nx, ny, nz = -nx, -ny, -nz
-        px, py, pz = ox + tf * dx, oy + tf * dy, oz + tf * dz
-        hit_pos[nh, 0], hit_pos[nh, 1], hit_pos[nh, 2] = px, py, pz
-        hit_dir[nh, 0], hit_dir[nh, 1], hit_dir[nh, 2] = d[i, 0], d[i, 1], d[i, 2]
-        hit_flux[nh, 0], hit_flux[nh, 1], hit_flux[nh, 2] = f[i, 0], f[i, 1], f[i, 2]
-        hit_nrm[nh, 0], hit_nrm[nh, 1], hit_nrm[nh, 2] = nx, ny, nz
-        hit_tri[nh] = t
-        nh += 1
-        m = material_of[t]
-        a0, a1, a2 = materials[m, 0], materials[m, 1], materials[m, 2]
-        ab0 += f0 * (1.0 - a0)
-        ab1 += f1 * (1.0 - a1)
-        ab2 += f2 * (1.0 - a2)
-        if bounce >= max_bounces:
-            tr0 += f0 * a0
-            tr1 += f1 * a1
-            tr2 += f2 * a2
-            continue
-        state, u0, u1 = uniform2(rng[i])
-        if u0 >= materials[m, 3]:  # absorbed by Russian roulette (always when q = 0)
-            continue
-        state, u2, _ = uniform2(state)
-        # Cosine-weighted direction about the face normal on the side the photon arrived.
-        rx, ry, rz = cosine_hemisphere(nx, ny, nz, u1, u2)
-        o[w, 0], o[w, 1], o[w, 2] = px + eps * nx, py + eps * ny, pz + eps * nz
-        d[w, 0], d[w, 1], d[w, 2] = rx, ry, rz
-        f[w, 0], f[w, 1], f[w, 2] = f0 * materials[m, 4], f1 * materials[m, 5], f2 * materials[m, 6]
-        length[w] = RAY_FAR
-        rng[w] = state
-        w += 1
-    sums[0, 0] += ab0
-    sums[0, 1] += ab1
-    sums[0, 2] += ab2
-    sums[1, 0] += es0
-    sums[1, 1] += es1
-    sums[1, 2] += es2
-    sums[2, 0] += tr0
-    sums[2, 1] += tr1
-    sums[2, 2] += tr2
-    return w, nh, kept
-
-
-def material_table(albedo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-triangle index into a table of the distinct materials, rows (albedo RGB clipped to
-    [0, 1], Russian-roulette survival probability q = max(albedo), albedo / q): a small table
-    stays in cache where per-triangle rows would not."""
-    a = np.clip(np.asarray(albedo, np.float64).reshape(-1, 3), 0.0, 1.0)
-    if len(a) == 0:
-        return np.zeros(0, np.int32), np.zeros((1, 7))
-    table, index = np.unique(a, axis=0, return_inverse=True)
-    q = table.max(axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        carried = np.where(q[:, None] > 0.0, table / q[:, None], 0.0)
-    dtype = np.uint16 if len(table) <= 65536 else np.int32
-    return (np.ascontiguousarray(index.reshape(-1), dtype),
-            np.ascontiguousarray(np.column_stack([table, q, carried])))
-
-
 class _Stream:
     """Photons traced together by one thread: the log of their rays (every bounce in order; they
     become the segments) and their hits, laid out as the batch's records, in buffers that grow as
@@ -203,6 +111,7 @@ class _Stream:
         self.skip_rays = self.skip_hits = self.skip_kept = 0  # the first bounce's records, when left out
         self.sums = np.zeros((3, 3))
         self.embree_seconds = 0.0
+        self.passes = self.cut = 0
         self._alloc(0, 0)
 
     def _alloc(self, rays: int, hits: int):
@@ -210,12 +119,21 @@ class _Stream:
         self.o, self.d, self.f = vec(rays), vec(rays), vec(rays)
         self.length = np.empty(rays, np.float32)
         self.rng = np.empty(rays, np.uint64)
+        # What Embree found for each ray: triangle (−1: none), geometric normal, barycentrics; and
+        # whether the ray went on through a cut-out.
+        self.prim = np.empty(rays, np.int32)
+        self.ng = vec(rays)
+        self.bu = np.empty(rays, np.float32)
+        self.bv = np.empty(rays, np.float32)
+        self.through = np.zeros(rays, np.bool_)
         self.hit_pos, self.hit_dir, self.hit_flux, self.hit_nrm = vec(hits), vec(hits), vec(hits), vec(hits)
         self.hit_tri = np.empty(hits, np.int32)
 
+    RAY_ARRAYS = 10  # the first ten of _arrays() have a row per ray
+
     def _arrays(self):
-        return (self.o, self.d, self.f, self.length, self.rng, self.hit_pos, self.hit_dir, self.hit_flux,
-                self.hit_nrm, self.hit_tri)
+        return (self.o, self.d, self.f, self.length, self.rng, self.prim, self.ng, self.bu, self.bv, self.through,
+                self.hit_pos, self.hit_dir, self.hit_flux, self.hit_nrm, self.hit_tri)
 
     def reserve(self, rays: int, hits: int):
         """Room for `rays` rays and `hits` hits, keeping what is logged so far."""
@@ -223,7 +141,7 @@ class _Stream:
             return
         old = self._arrays()
         self._alloc(max(rays, len(self.length) * 3 // 2), max(hits, len(self.hit_tri) * 3 // 2))
-        for a, b, n in zip(old, self._arrays(), [self.rays] * 5 + [self.hits] * 5):
+        for a, b, n in zip(old, self._arrays(), [self.rays] * self.RAY_ARRAYS + [self.hits] * 5):
             b[:n] = a[:n]
 
     @property
@@ -347,7 +265,7 @@ class _Records:
 
     def add(self, index: int, st: _Stream):
         """Stream `index` is traced (called from the thread that traced it)."""
-        self.stats[index] = (st.rays, st.sums.copy(), st.embree_seconds)
+        self.stats[index] = (st.rays, st.sums.copy(), st.embree_seconds, st.passes, st.cut)
         jobs = []
         with self._lock:
             self.waiting[index] = st
@@ -406,6 +324,7 @@ class PhotonTracer:
         self.escape_radius = 1.1 * radius
         self.eps = max(1e-5 * radius, 1e-6)
         self.material_of, self.materials = material_table(scene.albedo)
+        self.surfaces = surfaces(scene)
         self.stats = TraceStats()
         self.batches_done = 0
         self._caster: Optional[RayCaster] = None
@@ -472,28 +391,62 @@ class PhotonTracer:
         n = stop - start
         st.rays = st.hits = st.kept = 0
         st.skip_rays = st.skip_hits = st.skip_kept = 0
+        st.passes = st.cut = 0
         st.sums[:] = 0.0
         st.embree_seconds = 0.0
         st.reserve(2 * n, n)
         self.schedule.emit(batch, start, stop, st.o, st.d, st.f, st.rng)
         st.length[:n] = RAY_FAR
-        s, e, bounce = 0, n, 0
+        s, e, level = 0, n, 0
         st.rays = n
+        srf = self.surfaces
         while e > s:
             st.reserve(e + (e - s), st.hits + (e - s))
-            t0 = time.perf_counter()
-            _, prim, ng = self._caster.intersect(st.o[s:e], st.d[s:e], st.length[s:e])
-            st.embree_seconds += time.perf_counter() - t0
-            w, st.hits, kept = _bounce(s, e, prim, ng, st.o, st.d, st.f, st.length, st.rng, st.hit_pos,
-                                       st.hit_dir, st.hit_flux, st.hit_nrm, st.hit_tri, st.hits,
-                                       self.material_of, self.materials, bounce, self.bounces, self.centre,
-                                       self.escape_radius, self.eps, st.sums)
+            self._intersect(st, s, e)
+            if srf.cutout:
+                e = self._pass_cutouts(st, s, e)
+                st.rays = e
+                st.reserve(e + (e - s), st.hits + (e - s))
+            w, st.hits, kept = bounce(s, e, st.prim, st.ng, st.bu, st.bv, st.through, st.o, st.d, st.f, st.length,
+                                      st.rng, st.hit_pos, st.hit_dir, st.hit_flux, st.hit_nrm, st.hit_tri, st.hits,
+                                      self.material_of, self.materials, srf.albedo_tex, srf.tex_uvs, srf.pixels,
+                                      srf.info, level, self.bounces, self.centre, self.escape_radius, self.eps,
+                                      st.sums)
             st.kept += kept
-            if bounce == 0 and self.indirect_only:
+            if level == 0 and self.indirect_only:
                 st.skip_rays, st.skip_hits, st.skip_kept = e, st.hits, st.kept
             s, e, st.rays = e, w, w
-            bounce += 1
+            level += 1
         records.add(index, st)
+
+    def _intersect(self, st: _Stream, a: int, b: int) -> None:
+        """Embree on log rays a … b−1: hit distances into `length`, the rest into the log."""
+        t0 = time.perf_counter()
+        r = self._caster.hits(st.o[a:b], st.d[a:b], st.length[a:b])
+        st.embree_seconds += time.perf_counter() - t0
+        st.prim[a:b] = r["primID"]
+        st.ng[a:b] = r["Ng"]
+        st.bu[a:b] = r["u"]
+        st.bv[a:b] = r["v"]
+        st.through[a:b] = False
+
+    def _pass_cutouts(self, st: _Stream, s: int, e: int) -> int:
+        """Rays s … e−1 through cut-out surfaces, layer by layer (each pass traces only the rays
+        that went through): returns the end of this flight's rays in the log."""
+        srf = self.surfaces
+        a, b = s, e
+        for _ in range(MAX_PASSES):
+            st.rays = b
+            st.reserve(b + (b - a) + (e - s), st.hits + (e - s))
+            w = pass_through(a, b, st.prim, st.bu, st.bv, st.through, st.o, st.d, st.f, st.length, st.rng,
+                             srf.opacity, srf.opacity_tex, srf.tex_uvs, srf.pixels, srf.info, self.eps)
+            if w == b:
+                return b
+            st.passes += w - b
+            self._intersect(st, b, w)
+            a, b = b, w
+        st.cut += b - a  # the last ones stay where they landed, as if the surface were opaque
+        return b
 
     def _trace_batch(self, index: int) -> PhotonBatch:
         start, stop = self.schedule.ids(index)
@@ -510,8 +463,10 @@ class PhotonTracer:
                 j.result()
         batch = records.close(n)
         tr = self.stats
-        for rays, sums, embree in records.stats:  # in stream order: the sums do not depend on timing
+        for rays, sums, embree, passes, cut in records.stats:  # in stream order: sums do not depend on timing
             tr.rays += rays
+            tr.alpha_passes += passes
+            tr.alpha_cut += cut
             tr.absorbed += sums[0]
             tr.escaped += sums[1]
             tr.truncated += sums[2]

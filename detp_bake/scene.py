@@ -7,11 +7,14 @@ geometry is in world space, metres; colours are linear RGB; powers are watts as 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Union
+from typing import TYPE_CHECKING, Optional, Union
 
 import numpy as np
 
 from .errors import BakeError
+
+if TYPE_CHECKING:
+    from .textures import Textures
 
 
 @dataclass
@@ -90,6 +93,14 @@ class Scene:
     lights: list[Light] = field(default_factory=list)
     world: np.ndarray = field(default_factory=lambda: np.zeros(3))
     default_bounces: int = 4
+    # Textures (textures.py): albedo[t] × the RGB of albedo_texture[t] is a triangle's albedo where
+    # that index is ≥ 0; opacity[t] × the alpha of opacity_texture[t] how much light it stops
+    # (1: opaque). tex_uvs (T, 3, 2) are the UVs both textures are read at. None: untextured, opaque.
+    textures: Optional["Textures"] = None
+    tex_uvs: Optional[np.ndarray] = None
+    albedo_texture: Optional[np.ndarray] = None
+    opacity: Optional[np.ndarray] = None
+    opacity_texture: Optional[np.ndarray] = None
 
     @property
     def triangle_count(self) -> int:
@@ -127,6 +138,7 @@ class Scene:
                 raise BakeError(f"scene {name} has shape {arr.shape}, expected {shape}")
             if not np.all(np.isfinite(arr)):
                 raise BakeError(f"scene {name} contains NaN or infinite values")
+        self._check_textures()
         covered = np.zeros(t, bool)
         for obj in self.objects:
             if obj.first_triangle < 0 or obj.first_triangle + obj.triangle_count > t:
@@ -139,6 +151,21 @@ class Scene:
         for obj in self.objects:
             if obj.bake and obj.triangle_count == 0:
                 raise BakeError(f"object '{obj.name}' has no faces to bake")
+
+    def _check_textures(self) -> None:
+        t = self.triangle_count
+        k = len(self.textures.info) if self.textures is not None else 0
+        for name, arr in (("albedo_texture", self.albedo_texture), ("opacity_texture", self.opacity_texture)):
+            if arr is None:
+                continue
+            if arr.shape != (t,):
+                raise BakeError(f"scene {name} has shape {arr.shape}, expected ({t},)")
+            if np.any(arr >= k) or np.any(arr < -1):
+                raise BakeError(f"scene {name} refers to a texture that is not there")
+            if np.any(arr >= 0) and (self.tex_uvs is None or self.tex_uvs.shape != (t, 3, 2)):
+                raise BakeError(f"scene {name} is set but tex_uvs is missing or not ({t}, 3, 2)")
+        if self.opacity is not None and (self.opacity.shape != (t,) or not np.all(np.isfinite(self.opacity))):
+            raise BakeError("scene opacity must be one finite value per triangle")
 
     def object_index(self) -> np.ndarray:
         """Index into `objects` for every triangle."""
