@@ -37,11 +37,12 @@ from .errors import BakeCancelled, BakeError
 from .lights import _spot_att
 from .sampling import (cone_lobe, cosine_hemisphere, in_frame, jit, orthonormal_basis, photon_rng, seed_key,
                        uniform2, uniform_disc, uniform_triangle)
+from .environment import environment_rays
 from .scattering import MAX_PASSES
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
 from .textures import opacity_at, surfaces
 
-POINT, SUN, AREA, MESH, WORLD = 0, 1, 2, 3, 4
+POINT, SUN, AREA, MESH, WORLD, WORLD_MAP = 0, 1, 2, 3, 4, 5
 FAR = 1e37
 CHUNK = 2048  # texels per work item
 DEFAULT_SAMPLES = 16
@@ -59,6 +60,7 @@ class DirectLight:
     tri_pos: np.ndarray = None
     tri_normal: np.ndarray = None
     tri_radiance: np.ndarray = None  # per triangle, radiance × area / probability (RGB)
+    env: tuple = None  # WORLD_MAP: the environment's sampling tables (environment.py)
 
 
 def _row(*parts) -> np.ndarray:
@@ -115,7 +117,12 @@ def direct_lights(scene: Scene, samples: int) -> list[DirectLight]:
     if mesh is not None:
         out.append(mesh)
     world = np.asarray(scene.world, np.float64)
-    if np.any(world != 0.0):
+    if scene.world_map is not None:
+        pixels, marginal, cond, prob = scene.world_map.tables()
+        light = DirectLight("world", WORLD_MAP, np.zeros(32), samples)
+        light.env = (marginal, cond, prob, np.ascontiguousarray(scene.world_map.rotation, np.float64), pixels)
+        out.append(light)
+    elif np.any(world != 0.0):
         out.append(DirectLight("world", WORLD, _row(world), samples))
     return out
 
@@ -400,10 +407,13 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
         for li, light in enumerate(lights):
             key = seed_key(seed * 7919 + 1000003 * (li + 1))
             mesh = light.kind == MESH
-            k = _shadow_rays(light.kind, light.params, light.samples, key, a, b, pos, nrm, geo, eps,
-                             light.tri_cdf if mesh else empty_cdf, light.tri_pos if mesh else empty_tri,
-                             light.tri_normal if mesh else empty_vec, light.tri_radiance if mesh else empty_vec,
-                             o, d, t, w, owner)
+            if light.kind == WORLD_MAP:
+                k = environment_rays(*light.env, light.samples, key, a, b, pos, nrm, geo, eps, o, d, t, w, owner)
+            else:
+                k = _shadow_rays(light.kind, light.params, light.samples, key, a, b, pos, nrm, geo, eps,
+                                 light.tri_cdf if mesh else empty_cdf, light.tri_pos if mesh else empty_tri,
+                                 light.tri_normal if mesh else empty_vec,
+                                 light.tri_radiance if mesh else empty_vec, o, d, t, w, owner)
             if k == 0:
                 continue
             if srf.cutout:

@@ -379,7 +379,10 @@ def build_emitters(scene: Scene) -> list[Emitter]:
     mesh = mesh_emitter(scene, 1e-5 * radius)
     if mesh is not None:
         out.append(mesh)
-    if np.mean(scene.world) > 0.0:
+    if scene.world_map is not None:
+        from .environment import environment_emitter
+        out.append(environment_emitter(scene.world_map, centre, radius))
+    elif np.mean(scene.world) > 0.0:
         out.append(world_emitter(scene.world, centre, radius))
     out = [e for e in out if e.weight > 0.0 and np.all(np.asarray(e.flux) >= 0.0)]
     if not out:

@@ -14,6 +14,7 @@ import numpy as np
 from .errors import BakeError
 
 if TYPE_CHECKING:
+    from .environment import EnvironmentMap
     from .textures import Textures
 
 
@@ -97,6 +98,8 @@ class Scene:
     # that index is ≥ 0; opacity[t] × the alpha of opacity_texture[t] how much light it stops
     # (1: opaque). tex_uvs (T, 3, 2) are the UVs both textures are read at. None: untextured, opaque.
     textures: Optional["Textures"] = None
+    # An HDRI world (environment.py); when set it replaces `world`.
+    world_map: Optional["EnvironmentMap"] = None
     tex_uvs: Optional[np.ndarray] = None
     albedo_texture: Optional[np.ndarray] = None
     opacity: Optional[np.ndarray] = None

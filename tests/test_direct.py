@@ -151,3 +151,66 @@ def test_bad_direct_settings_are_refused(setting, value):
     from detp_bake.errors import BakeError
     with pytest.raises(BakeError, match=setting):
         BakeSettings(**{setting: value}).validate()
+
+
+def _env(image, rotation=np.eye(3)):
+    from detp_bake.environment import EnvironmentMap
+    return EnvironmentMap(np.asarray(image, np.float32), np.asarray(rotation, float))
+
+
+@pytest.mark.parametrize("direct", ["sampled", "photons"])
+def test_constant_environment_map_is_the_constant_world(direct):
+    """An HDRI of one colour lights an open plane as that world colour does: E = π·L."""
+    sc = make_scene([("Plane", grid(2.0, 2.0, 2), 0.5, True)], [], resolution=16)
+    sc.world_map = _env(np.broadcast_to(np.array([0.2, 0.4, 0.6], np.float32), (32, 64, 3)))
+    r = compute(sc, BakeSettings(photons=1_000_000, bounces=0, direct=direct, direct_samples=64, denoise=False,
+                                 estimator_settings=EstimatorSettings(radius=0.2)))
+    assert np.allclose(r.value.mean(axis=0), [0.2, 0.4, 0.6], rtol=0.015)  # E/π = L
+
+
+@pytest.mark.parametrize("direct", ["sampled", "photons"])
+def test_a_bright_spot_in_the_map_lights_like_a_sun_from_where_cycles_puts_it(direct):
+    """One bright pixel block at image u = 0.25, v = 0.75 (+y, 45° up, by Cycles' equirectangular
+    mapping) over a dark sky: a plane facing +z gets E = L·Ω·cos 45°, and a Mapping rotation
+    moves where the spot is in the world."""
+    h, w = 64, 128
+    img = np.zeros((h, w, 3), np.float32)
+    rows, cols = slice(int(0.75 * h) - 1, int(0.75 * h) + 1), slice(int(0.25 * w) - 1, int(0.25 * w) + 1)
+    img[rows, cols] = 500.0
+    theta = (np.arange(h)[::-1] + 0.5) / h * np.pi
+    omega = (2 * np.pi / w) * (np.pi / h) * np.sin(theta)
+    e_spot = 500.0 * omega[rows].sum() * 2 * np.cos(np.radians(45))  # two columns
+    sc = make_scene([("Plane", grid(2.0, 2.0, 2), 0.5, True)], [], resolution=8)
+    sc.world_map = _env(img)
+    r = compute(sc, BakeSettings(photons=400_000, bounces=0, direct=direct, direct_samples=16, denoise=False,
+                                 estimator_settings=EstimatorSettings(radius=0.3)))
+    assert np.isclose(r.value[:, 0].mean() * np.pi, e_spot, rtol=0.03)
+    # Which way it comes from: a wall facing the spot's world direction sees it, the wall's back
+    # does not; with the Mapping rotation (90° about z) the spot moves from +y to R⁻¹·(+y) = +x.
+    from detp_bake.direct import direct_irradiance
+    from detp_bake.photons import RayCaster
+    from detp_bake.texels import rasterise
+    uv = np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1.0]]])
+    turn = np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1.0]])
+    for rotation, towards in ((np.eye(3), [0, 1.0, 0]), (turn, [1.0, 0, 0])):
+        assert np.allclose(rotation.T @ [0, 1.0, 0], towards)
+        for facing, lit in ((np.array(towards), True), (-np.array(towards), False)):
+            ws = make_scene([("Wall", (_face(facing), np.broadcast_to(facing, (2, 3, 3)).copy(), uv), 0.5, True)],
+                            [], resolution=4)
+            ws.world_map = _env(img, rotation)
+            e, _ = direct_irradiance(ws, rasterise(ws), RayCaster(ws.positions), 16)
+            if lit:
+                assert e[:, 0].mean() > 0.5 * e_spot
+            else:
+                assert e[:, 0].mean() < 0.01 * e_spot
+
+
+def _face(n):
+    """Two triangles of a 1 m square through the origin facing n (horizontal n)."""
+    t = np.array([-n[1], n[0], 0.0])
+    z = np.array([0.0, 0.0, 1.0])
+    a, b, c, d = -0.5 * t - 0.5 * z, 0.5 * t - 0.5 * z, 0.5 * t + 0.5 * z, -0.5 * t + 0.5 * z
+    tris = np.array([[a, b, c], [a, c, d]])
+    if np.dot(np.cross(b - a, c - a), n) < 0:
+        tris = tris[:, [0, 2, 1]]
+    return tris
