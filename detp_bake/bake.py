@@ -147,6 +147,8 @@ class BakeResult:
             "photons": st.photons,
             "segments": st.segments,
             "hits": st.hits,
+            "photons_hit": st.photons_hit,  # photons that met the scene at all
+            "alpha": {"passes": st.alpha_passes, "cut": st.alpha_cut},
             "rays": st.rays,
             "flux": {"emitted": st.emitted.tolist(), "absorbed": st.absorbed.tolist(),
                      "escaped": st.escaped.tolist(), "truncated": st.truncated.tolist()},
@@ -190,12 +192,18 @@ def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional
         if obj.bake and obj.resolution <= 0:
             obj.resolution = settings.resolution
     sampled = settings.direct == "sampled"
-    caster = RayCaster(scene.positions)
-    tracer = PhotonTracer(scene, settings.photons, bounces, settings.seed,
-                          settings.batch_size, settings.threads, indirect_only=sampled, caster=caster)
     t0 = time.perf_counter()
     texels = texels_mod.rasterise(scene)
     rasterise_seconds = time.perf_counter() - t0
+    # DETP discs reach past a surface's edge by their radius and count what passes there: sun
+    # photons must start that far beyond the footprint of the geometry too.
+    reach = 0.0
+    if any(name != "photon_map" for name in names) and len(texels):
+        from .estimators.discs import disc_radius
+        reach = float(np.max(disc_radius(texels, settings.estimator_settings)))
+    caster = RayCaster(scene.positions)
+    tracer = PhotonTracer(scene, settings.photons, bounces, settings.seed, settings.batch_size, settings.threads,
+                          indirect_only=sampled, caster=caster, margin=reach)
     direct_e, direct_info = None, {"mode": settings.direct}
     if sampled:
         def direct_progress(fraction):

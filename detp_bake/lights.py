@@ -226,15 +226,27 @@ def _emit_parallel(key, first, n, frame, cos_max, centre, radius, flux, o, d, f,
         _flush(buf, state, a, b, o, d, f, rng)
 
 
-def sun_emitter(light: SunLight, centre: np.ndarray, radius: float) -> Emitter:
-    """Photons start on a disc of the scene's bounding radius, outside the scene, facing the sun."""
+def sun_emitter(light: SunLight, centre: np.ndarray, radius: float, positions: np.ndarray = None,
+                margin: float = 0.0) -> Emitter:
+    """Photons start outside the scene, facing the sun, on the scene's footprint across the sun's
+    direction widened by `margin` metres (footprint.py), or on a disc of the bounding radius when
+    there are no triangles."""
     e = np.asarray(light.irradiance, np.float64)
     axis = np.asarray(light.direction, np.float64)
     axis = axis / np.linalg.norm(axis)
-    flux = e * np.pi * radius ** 2
     cos_max = float(np.cos(0.5 * light.angle)) if light.angle > 0.0 else 1.0
     centre = np.asarray(centre, np.float64)
     frame = _frame(axis)
+    if positions is not None and len(positions):
+        from .footprint import Footprint, emit_sun
+        fp = Footprint.build(positions, axis, frame, centre, radius, 0.5 * float(light.angle), margin)
+        flux = e * fp.area
+
+        def emit(key, first, n, total, o, d, f, rng):
+            emit_sun(key, first, n, frame, cos_max, fp.origin, fp.cell, fp.cells, flux / total, o, d, f, rng)
+
+        return Emitter(light.name, flux, emit)
+    flux = e * np.pi * radius ** 2
 
     def emit(key, first, n, total, o, d, f, rng):
         _emit_parallel(key, first, n, frame, cos_max, centre, float(radius), flux / total, o, d, f, rng)
@@ -362,7 +374,8 @@ def world_emitter(radiance: np.ndarray, centre: np.ndarray, radius: float) -> Em
     return Emitter("world", flux, emit)
 
 
-def build_emitters(scene: Scene) -> list[Emitter]:
+def build_emitters(scene: Scene, margin: float = 0.0) -> list[Emitter]:
+    """Every emitter of the scene; `margin` widens the sun's footprint (lights.sun_emitter)."""
     centre, radius = scene.bounds()
     out: list[Emitter] = []
     for light in scene.lights:
@@ -371,7 +384,7 @@ def build_emitters(scene: Scene) -> list[Emitter]:
         elif isinstance(light, SpotLight):
             out.append(spot_emitter(light))
         elif isinstance(light, SunLight):
-            out.append(sun_emitter(light, centre, radius))
+            out.append(sun_emitter(light, centre, radius, scene.positions, margin))
         elif isinstance(light, AreaLight):
             out.append(area_emitter(light))
         else:

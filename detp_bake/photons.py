@@ -66,6 +66,7 @@ class TraceStats:
     truncated: np.ndarray = field(default_factory=lambda: np.zeros(3))
     seconds: float = 0.0
     embree_seconds: float = 0.0  # time in Embree calls, summed over the threads
+    photons_hit: int = 0  # photons whose first flight landed on a surface (the rest missed the scene)
     alpha_passes: int = 0  # flights continued through a cut-out surface
     alpha_cut: int = 0  # flights stopped because they passed MAX_PASSES cut-outs
 
@@ -111,7 +112,7 @@ class _Stream:
         self.skip_rays = self.skip_hits = self.skip_kept = 0  # the first bounce's records, when left out
         self.sums = np.zeros((3, 3))
         self.embree_seconds = 0.0
-        self.passes = self.cut = 0
+        self.passes = self.cut = self.first_hits = 0
         self._alloc(0, 0)
 
     def _alloc(self, rays: int, hits: int):
@@ -265,7 +266,7 @@ class _Records:
 
     def add(self, index: int, st: _Stream):
         """Stream `index` is traced (called from the thread that traced it)."""
-        self.stats[index] = (st.rays, st.sums.copy(), st.embree_seconds, st.passes, st.cut)
+        self.stats[index] = (st.rays, st.sums.copy(), st.embree_seconds, st.passes, st.cut, st.first_hits)
         jobs = []
         with self._lock:
             self.waiting[index] = st
@@ -310,7 +311,7 @@ class PhotonTracer:
 
     def __init__(self, scene: Scene, photons: int, bounces: int, seed: int = 0,
                  batch_size: int = 200_000, threads: int = 0, indirect_only: bool = False,
-                 caster: Optional[RayCaster] = None):
+                 caster: Optional[RayCaster] = None, margin: float = 0.0):
         self.scene = scene
         self.bounces = int(bounces)
         # Leave out each photon's first flight (light to first surface) and where it lands: the
@@ -318,7 +319,8 @@ class PhotonTracer:
         self.indirect_only = bool(indirect_only)
         self._shared_caster = caster
         self.batch_size = int(batch_size)
-        self.schedule = BatchSchedule(build_emitters(scene), int(photons), int(seed), self.batch_size)
+        # margin: how far past the geometry's footprint sun photons must start (lights.sun_emitter)
+        self.schedule = BatchSchedule(build_emitters(scene, margin), int(photons), int(seed), self.batch_size)
         self.threads = threads or numba.config.NUMBA_NUM_THREADS
         self.centre, radius = scene.bounds()
         self.escape_radius = 1.1 * radius
@@ -391,7 +393,7 @@ class PhotonTracer:
         n = stop - start
         st.rays = st.hits = st.kept = 0
         st.skip_rays = st.skip_hits = st.skip_kept = 0
-        st.passes = st.cut = 0
+        st.passes = st.cut = st.first_hits = 0
         st.sums[:] = 0.0
         st.embree_seconds = 0.0
         st.reserve(2 * n, n)
@@ -413,8 +415,10 @@ class PhotonTracer:
                                       srf.info, level, self.bounces, self.centre, self.escape_radius, self.eps,
                                       st.sums)
             st.kept += kept
-            if level == 0 and self.indirect_only:
-                st.skip_rays, st.skip_hits, st.skip_kept = e, st.hits, st.kept
+            if level == 0:
+                st.first_hits = st.hits
+                if self.indirect_only:
+                    st.skip_rays, st.skip_hits, st.skip_kept = e, st.hits, st.kept
             s, e, st.rays = e, w, w
             level += 1
         records.add(index, st)
@@ -463,8 +467,9 @@ class PhotonTracer:
                 j.result()
         batch = records.close(n)
         tr = self.stats
-        for rays, sums, embree, passes, cut in records.stats:  # in stream order: sums do not depend on timing
+        for rays, sums, embree, passes, cut, first in records.stats:  # in stream order: sums do not depend on timing
             tr.rays += rays
+            tr.photons_hit += first
             tr.alpha_passes += passes
             tr.alpha_cut += cut
             tr.absorbed += sums[0]
