@@ -139,3 +139,36 @@ def test_packed_charts_do_not_overlap():
     apart_y = (y[:, None] + h[:, None] + margin <= y[None] + 1e-12) | (y[None] + h[None] + margin <= y[:, None] + 1e-12)
     assert np.all(apart_x | apart_y | np.eye(len(x), dtype=bool))
     assert np.sum(w * h) > 0.4  # and the square is not mostly empty
+
+
+ROOMS = {  # issue 9's quality scenes: name -> (generator module, triangles, mesh objects, light types, world)
+    "l_room": ("make_l_room", 122, 9, ["AREA", "POINT"], [0.0, 0.0, 0.0]),
+    "window_room": ("make_window_room", 186, 8, ["AREA", "AREA", "POINT", "POINT", "SPOT", "SPOT", "SUN"],
+                    [0.35, 0.45, 0.6]),
+}
+
+
+@pytest.mark.parametrize("name", sorted(ROOMS))
+def test_quality_rooms_are_saved_as_built(bpy, name):
+    """The L-shaped room and the window room: counts, lights, world, lightmap UVs in [0, 1], albedos,
+    and a fresh build (Lightmap Pack aside) equal to the saved file."""
+    module, triangles, n_objects, lights, sky = ROOMS[name]
+    scene = _open(bpy, name)
+    counts = make_tree.mesh_triangles(scene)
+    assert len(counts) == n_objects and sum(counts.values()) == triangles
+    assert sorted(o.data.type for o in scene.objects if o.type == "LIGHT") == lights
+    assert scene.cycles.diffuse_bounces == 4 and scene.camera is not None
+    for obj in _meshes(scene):
+        me = obj.data
+        assert [layer.name for layer in me.uv_layers] == ["UVMap", "Lightmap"], obj.name
+        uv = _uv(me, "Lightmap")
+        assert uv.min() >= 0.0 and uv.max() <= 1.0, obj.name
+        albedo, emission = blender_scene.material_albedo_emission(obj.material_slots[0].material)
+        assert np.all((albedo >= 0.2) & (albedo <= 0.8)), (obj.name, albedo)
+    sc = blender_scene.export_scene(scene, bpy.context.evaluated_depsgraph_get(), None, None, 16, log=print)
+    assert np.allclose(sc.world, sky, atol=1e-6)
+    saved = _snapshot(bpy, scene)
+    fresh = _snapshot(bpy, getattr(__import__(module), f"build_{name}")())
+    assert sorted(fresh) == sorted(saved)
+    for obj in saved:
+        assert fresh[obj][0] == saved[obj][0] and np.allclose(fresh[obj][1], saved[obj][1], atol=1e-5), obj
