@@ -2,10 +2,10 @@
 
 Each light becomes an `Emitter` that knows its emitted flux (RGB watts) and can draw photons
 (origin, direction, flux). Photons are shared out between emitters in proportion to their flux,
-with deterministic counts (largest remainder), so every photon of one emitter carries about the
-same flux and the total emitted flux is exact. Each light type has a compiled kernel; photon i
-draws its numbers from its own random stream (`sampling.py`), so emission can run in pieces, in
-any order, on any thread.
+with deterministic counts (largest remainder, `allocate`; batch by batch in schedule.py), so every
+photon of one emitter carries about the same flux and the total emitted flux is exact. Each light
+type has a compiled kernel; photon i draws its numbers from its own random stream (`sampling.py`),
+so emission can run in pieces, in any order, on any thread.
 """
 from __future__ import annotations
 
@@ -14,7 +14,6 @@ from typing import Callable
 
 import numpy as np
 
-from . import sampling
 from .sampling import (cone_lobe, cosine_hemisphere, cosine_lobe, in_frame, inline, jit, orthonormal_basis,
                        photon_rng, uniform2, uniform_disc, uniform_sphere, uniform_triangle)
 from .errors import BakeError
@@ -412,37 +411,3 @@ def allocate(emitters: list[Emitter], photons: int) -> np.ndarray:
     order = np.argsort(-(share - counts), kind="stable")
     counts[order[:rest]] += 1
     return np.maximum(counts, 1)
-
-
-class PhotonSchedule:
-    """Photon i of the whole bake belongs to one emitter (emitters in order, each a run of ids);
-    its origin, direction and flux depend on the seed and i alone."""
-
-    def __init__(self, emitters: list[Emitter], photons: int, seed: int):
-        self.emitters = emitters
-        self.counts = allocate(emitters, photons)
-        self.starts = np.concatenate([[0], np.cumsum(self.counts)])
-        self.total = int(self.starts[-1])
-        self.seed = seed
-        self.key = sampling.seed_key(seed)
-
-    @property
-    def emitted_flux(self) -> np.ndarray:
-        return np.sum([e.flux for e in self.emitters], axis=0)
-
-    def emit(self, start: int, stop: int, origins: np.ndarray, dirs: np.ndarray, flux: np.ndarray,
-             rng: np.ndarray) -> None:
-        """Photons [start, stop) into rows 0 … stop − start of the (N, 3) arrays (float32 or 64),
-        their random states into `rng` (uint64; empty: not kept)."""
-        for e, a, b, total in zip(self.emitters, self.starts[:-1], self.starts[1:], self.counts):
-            lo, hi = max(int(a), start), min(int(b), stop)
-            if hi > lo:
-                rows = slice(lo - start, hi - start)
-                e.emit(self.key, lo, hi - lo, int(total), origins[rows], dirs[rows], flux[rows],
-                       rng[rows] if len(rng) else rng)
-
-    def photons(self, start: int, stop: int):
-        """Photons [start, stop) as float64 (origins, directions, flux)."""
-        out = [np.empty((stop - start, 3)) for _ in range(3)]
-        self.emit(start, stop, *out, np.empty(0, np.uint64))
-        return tuple(out)
