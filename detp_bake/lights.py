@@ -396,15 +396,18 @@ def build_emitters(scene: Scene, margin: float = 0.0) -> list[Emitter]:
         out.append(environment_emitter(scene.world_map, centre, radius))
     elif np.mean(scene.world) > 0.0:
         out.append(world_emitter(scene.world, centre, radius))
-    out = [e for e in out if e.weight > 0.0 and np.all(np.asarray(e.flux) >= 0.0)]
+    # A negative light (Cycles subtracts it) keeps its sign: its photons carry negative flux, which
+    # every estimator and the Russian roulette (by albedo, not flux) treat linearly.
+    out = [e for e in out if np.any(np.asarray(e.flux) != 0.0)]
     if not out:
         raise BakeError("the scene has no light: add a light, an emissive material or a world colour")
     return out
 
 
 def allocate(emitters: list[Emitter], photons: int) -> np.ndarray:
-    """Photon count per emitter ∝ flux; every emitter gets at least one photon."""
-    w = np.array([e.weight for e in emitters], np.float64)
+    """Photon count per emitter ∝ |flux| (a negative light needs as many photons as a positive
+    one of the same power); every emitter gets at least one photon."""
+    w = np.abs(np.array([e.weight for e in emitters], np.float64))
     share = w / w.sum() * photons
     counts = np.floor(share).astype(np.int64)
     rest = photons - counts.sum()

@@ -62,6 +62,58 @@ class AreaLight:
 
 Light = Union[PointLight, SpotLight, SunLight, AreaLight]
 
+# Beyond these a setting is a typing slip, not a scene (FLT_MAX is what Blender stores for "inf"
+# in most fields): a sun 10⁶ km away still needs under 10²⁰ W as a point light.
+MAX_POWER = 1e20  # W, or W/m² for a sun
+MAX_SIZE = 1e9  # m
+
+
+def _finite(light, setting: str, value, unit: str = "", limit: Optional[float] = None, low=None) -> np.ndarray:
+    v = np.asarray(value, np.float64)
+    if np.isnan(v).any():
+        raise BakeError(f"light '{light.name}': {setting} is not a number")
+    if np.isinf(v).any():
+        raise BakeError(f"light '{light.name}': {setting} is infinite")
+    if limit is not None and v.size and np.abs(v).max() > limit:
+        raise BakeError(f"light '{light.name}': {setting} {np.abs(v).max():.3g}{unit} is absurd "
+                        f"(more than {limit:.0e}{unit})")
+    if low is not None and v.size and v.min() < low:
+        raise BakeError(f"light '{light.name}': {setting} {v.min():.3g}{unit} is below {low:g}{unit}")
+    return v
+
+
+def check_light(light: "Light") -> None:
+    """BakeError naming the light and the setting when a value is NaN, infinite or absurd.
+    Negative power is allowed: Cycles subtracts such a light, and so do the photons."""
+    if isinstance(light, SunLight):
+        _finite(light, "strength", light.irradiance, " W/m²", MAX_POWER)
+        _finite(light, "angle", light.angle, " rad", low=0.0)
+        if light.angle > np.pi + 1e-6:
+            raise BakeError(f"light '{light.name}': angle {light.angle:.3g} rad is more than π")
+    else:
+        _finite(light, "power", light.power, " W", MAX_POWER)
+    if isinstance(light, (PointLight, SpotLight)):
+        _finite(light, "position", light.position, " m", MAX_SIZE)
+        _finite(light, "radius", light.radius, " m", MAX_SIZE, low=0.0)
+    if isinstance(light, (SpotLight, SunLight)):
+        d = _finite(light, "direction", light.direction)
+        if not np.linalg.norm(d) > 0.0:
+            raise BakeError(f"light '{light.name}': its direction is zero (a zero scale?)")
+    if isinstance(light, SpotLight):
+        size = float(_finite(light, "spot size", light.spot_size, " rad"))
+        if not 0.0 < size <= np.pi + 1e-6:
+            raise BakeError(f"light '{light.name}': spot size {size:.3g} rad is not in (0, π]")
+        blend = float(_finite(light, "spot blend", light.blend))
+        if not 0.0 <= blend <= 1.0:
+            raise BakeError(f"light '{light.name}': spot blend {blend:.3g} is not in [0, 1]")
+    if isinstance(light, AreaLight):
+        m = _finite(light, "transform", light.matrix, "", MAX_SIZE)
+        _finite(light, "size", (light.size_x, light.size_y), " m", MAX_SIZE, low=0.0)
+        if m.shape != (4, 4) or not np.linalg.norm(np.cross(m[:3, 0], m[:3, 1])) > 0.0:
+            raise BakeError(f"light '{light.name}': its transform has a zero scale")
+        if light.shape.upper() not in ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE"):
+            raise BakeError(f"light '{light.name}': unknown area shape '{light.shape}'")
+
 
 @dataclass
 class BakeObject:
@@ -104,6 +156,9 @@ class Scene:
     albedo_texture: Optional[np.ndarray] = None
     opacity: Optional[np.ndarray] = None
     opacity_texture: Optional[np.ndarray] = None
+    # What the exporter found (blender_scene.export_scene): instance and triangle counts, bytes per
+    # triangle, what it left out and why. Plain JSON-able values, for report.json.
+    export_stats: dict = field(default_factory=dict)
 
     @property
     def triangle_count(self) -> int:
@@ -139,8 +194,6 @@ class Scene:
                                  ("emission", self.emission, (t, 3))):
             if arr.shape != shape:
                 raise BakeError(f"scene {name} has shape {arr.shape}, expected {shape}")
-            if not np.all(np.isfinite(arr)):
-                raise BakeError(f"scene {name} contains NaN or infinite values")
         self._check_textures()
         covered = np.zeros(t, bool)
         for obj in self.objects:
@@ -149,6 +202,17 @@ class Scene:
             covered[obj.triangles] = True
         if t and not covered.all():
             raise BakeError("some triangles belong to no object")
+        for name, arr in (("positions", self.positions), ("normals", self.normals), ("uvs", self.uvs),
+                          ("albedo", self.albedo), ("emission", self.emission)):
+            bad = ~np.isfinite(arr.reshape(t, -1)).all(axis=1)
+            if bad.any():
+                owner = self.objects[int(self.object_index()[np.argmax(bad)])].name
+                raise BakeError(f"object '{owner}': its {name} contain NaN or infinite values")
+        world = np.asarray(self.world, np.float64)
+        if world.shape != (3,) or not np.all(np.isfinite(world)) or np.abs(world).max() > MAX_POWER:
+            raise BakeError(f"the world colour {world.tolist()} is not a finite colour")
+        for light in self.lights:
+            check_light(light)
         if not any(o.bake for o in self.objects):
             raise BakeError("no object to bake: select or include at least one mesh object")
         for obj in self.objects:
