@@ -1,8 +1,18 @@
-"""A balanced bounding-volume hierarchy over boxes, compiled with numba.
+"""A bounding-volume hierarchy over the DETP discs, built from their Z-order, compiled with numba.
 
-Median splits on the longest axis of the centroids give a tree of depth ⌈log₂(n / leaf)⌉: the
-balanced case of the paper's bound for disc indexing, O(n_R·∛n_P) rather than O(n_R·∛n_P·log n_P).
-Nodes are flat arrays; a node with `left < 0` is a leaf holding `order[start:start + count]`.
+Build: the discs are sorted along a 63-bit Morton curve (morton.py) and a node splits its run of
+discs where the highest Morton bit that differs across the run flips (a radix split, the idea of
+Karras's LBVH), so every node is one cell of the Z-order octree and its box stays compact. No sort
+per level: the codes are sorted once, and the split is a binary search. Runs of equal codes split
+in the middle. Leaves hold at most `leaf` discs.
+
+Each node is one float32 row: its box, rounded outwards so that a segment never misses a disc it
+crosses, and a normal cone (axis a, threshold c) such that every disc below it faces away from any
+direction w with w·a ≥ c. DETP counts only segments that arrive from the front, so a segment
+leaving a floor skips the floor's whole subtree instead of testing every disc round its origin.
+
+`clusters` cut the tree into subtrees of at most `cluster` discs: the disc index's unit of parallel
+work. Every disc lies in one cluster, so no two threads ever add to the same disc.
 """
 from __future__ import annotations
 
@@ -11,18 +21,22 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from .morton import morton_codes
+
 LEAF_SIZE = 4
+CONE_NONE = 2.0  # a threshold no unit direction reaches: the node's discs face every way
+# Row layout of `node`: box lo (0-2), box hi (3-5), cone axis (6-8), cone threshold (9).
+LO, HI, AXIS, CONE = 0, 3, 6, 9
 
 
 @dataclass
-class BVH:
-    lo: np.ndarray
-    hi: np.ndarray
-    left: np.ndarray
-    right: np.ndarray
-    start: np.ndarray
-    count: np.ndarray
-    order: np.ndarray
+class DiscTree:
+    order: np.ndarray  # (n,) int64: the disc at each sorted position
+    node: np.ndarray  # (m, 10) float32: box lo, box hi, cone axis, cone threshold
+    left: np.ndarray  # (m,) int32: first child (the second is left + 1), -1 for a leaf
+    first: np.ndarray  # (m,) int32: first sorted disc under the node
+    count: np.ndarray  # (m,) int32: discs under the node
+    clusters: np.ndarray  # (k,) int32: roots of the subtrees that are the units of parallel work
 
     @property
     def nodes(self) -> int:
@@ -30,82 +44,231 @@ class BVH:
 
     @property
     def depth(self) -> int:
-        return _depth(self.left, self.right)
+        return _depth(self.left)
 
 
 @numba.njit(cache=True)
-def _build(lo, hi, leaf_size):
-    n = lo.shape[0]
-    order = np.arange(n)
-    cen = 0.5 * (lo + hi)
-    cap = 2 * n + 1  # median splits can leave leaves smaller than leaf_size
-    nlo = np.empty((cap, 3))
-    nhi = np.empty((cap, 3))
-    left = np.full(cap, -1, np.int64)
-    right = np.full(cap, -1, np.int64)
-    start = np.zeros(cap, np.int64)
-    count = np.zeros(cap, np.int64)
-    st_node = np.empty(cap, np.int64)
-    st_a = np.empty(cap, np.int64)
-    st_b = np.empty(cap, np.int64)
-    sp = 0
-    st_node[0], st_a[0], st_b[0] = 0, 0, n
+def _topology(codes, leaf):
+    """Radix splits of the sorted codes, depth first; a parent always comes before its children."""
+    n = codes.shape[0]
+    cap = 2 * n + 1
+    left = np.full(cap, -1, np.int32)
+    first = np.zeros(cap, np.int32)
+    count = np.zeros(cap, np.int32)
+    stack = np.empty((256, 3), np.int64)
+    stack[0, 0], stack[0, 1], stack[0, 2] = 0, 0, n
     sp = 1
     used = 1
     while sp > 0:
         sp -= 1
-        node, a, b = st_node[sp], st_a[sp], st_b[sp]
-        for c in range(3):
-            nlo[node, c] = np.inf
-            nhi[node, c] = -np.inf
-        clo = np.full(3, np.inf)
-        chi = np.full(3, -np.inf)
-        for p in range(a, b):
-            q = order[p]
-            for c in range(3):
-                nlo[node, c] = min(nlo[node, c], lo[q, c])
-                nhi[node, c] = max(nhi[node, c], hi[q, c])
-                clo[c] = min(clo[c], cen[q, c])
-                chi[c] = max(chi[c], cen[q, c])
-        axis = 0
-        for c in range(1, 3):
-            if chi[c] - clo[c] > chi[axis] - clo[axis]:
-                axis = c
-        if b - a <= leaf_size or chi[axis] - clo[axis] <= 0.0:
-            start[node] = a
-            count[node] = b - a
+        node, a, b = stack[sp, 0], stack[sp, 1], stack[sp, 2]
+        first[node] = a
+        count[node] = b - a
+        if b - a <= leaf:
             continue
-        sub = order[a:b].copy()
-        keys = np.empty(b - a)
-        for p in range(b - a):
-            keys[p] = cen[sub[p], axis]
-        idx = np.argsort(keys)
-        for p in range(b - a):
-            order[a + p] = sub[idx[p]]
         mid = (a + b) // 2
-        l, r = used, used + 1
+        diff = codes[a] ^ codes[b - 1]
+        if diff != 0:
+            bit = np.int64(1)
+            while diff > 1:
+                diff >>= 1
+                bit <<= 1
+            lo, hi = a + 1, b - 1  # the first code with `bit` set; codes[b - 1] has it
+            while lo < hi:
+                m = (lo + hi) // 2
+                if codes[m] & bit:
+                    hi = m
+                else:
+                    lo = m + 1
+            mid = lo
+        child = used
         used += 2
-        left[node], right[node] = l, r
-        st_node[sp], st_a[sp], st_b[sp] = l, a, mid
-        sp += 1
-        st_node[sp], st_a[sp], st_b[sp] = r, mid, b
-        sp += 1
-    return nlo[:used].copy(), nhi[:used].copy(), left[:used].copy(), right[:used].copy(), \
-        start[:used].copy(), count[:used].copy(), order
+        left[node] = child
+        stack[sp, 0], stack[sp, 1], stack[sp, 2] = child + 1, mid, b
+        stack[sp + 1, 0], stack[sp + 1, 1], stack[sp + 1, 2] = child, a, mid
+        sp += 2
+    return left[:used].copy(), first[:used].copy(), count[:used].copy()
+
+
+@numba.njit(cache=True, inline="always")
+def _down(x):
+    f = np.float32(x)
+    return np.nextafter(f, np.float32(-np.inf)) if np.float64(f) > x else f
+
+
+@numba.njit(cache=True, inline="always")
+def _up(x):
+    f = np.float32(x)
+    return np.nextafter(f, np.float32(np.inf)) if np.float64(f) < x else f
+
+
+@numba.njit(cache=True, inline="always")
+def _cylinder(c, n, r, slab, eps):
+    """One axis of the box round a disc's cylinder, as Discs.bounds computes it."""
+    half = r * np.sqrt(min(max(1.0 - n * n, 0.0), 1.0))
+    top = c + n * slab
+    return min(c, top) - half - eps, max(c, top) + half + eps
+
+
+@numba.njit(cache=True, inline="always")
+def _store_axis(node, k, s0, s1, s2):
+    """Store the normalised sum of normals (s0, s1, s2) as node k's cone axis, in float32; False
+    when the normals cancel out (no cone)."""
+    norm = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    if norm < 1e-9:
+        node[k, AXIS] = node[k, AXIS + 1] = node[k, AXIS + 2] = 0.0
+        node[k, CONE] = CONE_NONE
+        return False
+    node[k, AXIS], node[k, AXIS + 1], node[k, AXIS + 2] = s0 / norm, s1 / norm, s2 / norm
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def _store_cone(node, k, worst):
+    """Threshold for `worst` = max |n − a| over the node's normals (a: the stored axis). Since
+    w·n ≥ w·a − |w|·|n − a| and |w| < 1 + 1e-6 for float32 unit directions, w·a ≥ threshold gives
+    w·n > 0 for every disc below; 1e-9 covers the rounding of both dot products."""
+    c = worst * (1.0 + 1e-6) + 1e-9
+    if c < 1.0:
+        node[k, CONE] = _up(c)
+        return worst
+    node[k, CONE] = CONE_NONE
+    return CONE_NONE
+
+
+@numba.njit(cache=True, parallel=True)
+def _leaves(disc, eps, left, first, count, node, spread):
+    """Boxes of the discs' cylinders and normal cones, per leaf."""
+    for k in numba.prange(left.shape[0]):
+        if left[k] >= 0:
+            continue
+        a, b = first[k], first[k] + count[k]
+        l0 = l1 = l2 = np.inf
+        h0 = h1 = h2 = -np.inf
+        s0 = s1 = s2 = 0.0
+        for j in range(a, b):
+            r, sl = disc[6, j], disc[7, j]
+            lo, hi = _cylinder(disc[0, j], disc[3, j], r, sl, eps)
+            l0, h0 = min(l0, lo), max(h0, hi)
+            lo, hi = _cylinder(disc[1, j], disc[4, j], r, sl, eps)
+            l1, h1 = min(l1, lo), max(h1, hi)
+            lo, hi = _cylinder(disc[2, j], disc[5, j], r, sl, eps)
+            l2, h2 = min(l2, lo), max(h2, hi)
+            s0 += disc[3, j]
+            s1 += disc[4, j]
+            s2 += disc[5, j]
+        node[k, LO], node[k, LO + 1], node[k, LO + 2] = _down(l0), _down(l1), _down(l2)
+        node[k, HI], node[k, HI + 1], node[k, HI + 2] = _up(h0), _up(h1), _up(h2)
+        if not _store_axis(node, k, s0, s1, s2):
+            spread[k] = CONE_NONE
+            continue
+        a0, a1, a2 = np.float64(node[k, AXIS]), np.float64(node[k, AXIS + 1]), np.float64(node[k, AXIS + 2])
+        worst = 0.0
+        for j in range(a, b):
+            d0, d1, d2 = disc[3, j] - a0, disc[4, j] - a1, disc[5, j] - a2
+            worst = max(worst, np.sqrt(d0 * d0 + d1 * d1 + d2 * d2))
+        spread[k] = _store_cone(node, k, worst)
 
 
 @numba.njit(cache=True)
-def _depth(left, right):
-    depth = np.zeros(len(left), np.int64)
-    best = 0
-    for node in range(len(left)):  # children always come after their parent
-        if left[node] >= 0:
-            depth[left[node]] = depth[node] + 1
-            depth[right[node]] = depth[node] + 1
-        best = max(best, depth[node])
-    return best + 1
+def _inner(left, count, node, spread):
+    """Boxes and cones of inner nodes from their children, bottom up (children follow parents)."""
+    for k in range(left.shape[0] - 1, -1, -1):
+        l = left[k]
+        if l < 0:
+            continue
+        for c in range(3):
+            node[k, LO + c] = min(node[l, LO + c], node[l + 1, LO + c])
+            node[k, HI + c] = max(node[l, HI + c], node[l + 1, HI + c])
+        spread[k] = CONE_NONE
+        if node[l, CONE] > 1.0 or node[l + 1, CONE] > 1.0:
+            node[k, AXIS] = node[k, AXIS + 1] = node[k, AXIS + 2] = 0.0
+            node[k, CONE] = CONE_NONE
+            continue
+        s0 = s1 = s2 = 0.0
+        for q in range(l, l + 2):
+            s0 += np.float64(node[q, AXIS]) * count[q]
+            s1 += np.float64(node[q, AXIS + 1]) * count[q]
+            s2 += np.float64(node[q, AXIS + 2]) * count[q]
+        if not _store_axis(node, k, s0, s1, s2):
+            continue
+        worst = 0.0
+        for q in range(l, l + 2):  # |n − a| ≤ |n − a_child| + |a_child − a|
+            d = 0.0
+            for c in range(AXIS, AXIS + 3):
+                d += (np.float64(node[q, c]) - np.float64(node[k, c])) ** 2
+            worst = max(worst, np.sqrt(d) + spread[q])
+        spread[k] = _store_cone(node, k, worst)
 
 
-def build(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE) -> BVH:
-    return BVH(*_build(np.ascontiguousarray(lo, np.float64), np.ascontiguousarray(hi, np.float64),
-                       int(leaf_size)))
+@numba.njit(cache=True)
+def _clusters(left, count, size):
+    """Roots of the subtrees, largest first below the root, that hold at most `size` discs."""
+    roots = np.empty(left.shape[0], np.int32)
+    k = 0
+    stack = np.empty(256, np.int32)
+    stack[0] = 0
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        node = stack[sp]
+        if count[node] <= size or left[node] < 0:
+            roots[k] = node
+            k += 1
+        else:
+            stack[sp] = left[node] + 1
+            stack[sp + 1] = left[node]
+            sp += 2
+    return roots[:k].copy()
+
+
+@numba.njit(cache=True, parallel=True)
+def gather_discs(order, centre, normal, radius, slab):
+    """The discs' data in sorted order, one row per quantity (x, y, z, nx, ny, nz, r, δ, 1/(πr²)):
+    a leaf's discs are contiguous in every row."""
+    n = order.shape[0]
+    disc = np.empty((9, n))
+    for i in numba.prange(n):
+        j = order[i]
+        for c in range(3):
+            disc[c, i] = centre[j, c]
+            disc[3 + c, i] = normal[j, c]
+        r = radius[j]
+        disc[6, i] = r
+        disc[7, i] = slab[j]
+        disc[8, i] = 1.0 / (np.pi * (r * r))
+    return disc
+
+
+@numba.njit(cache=True)
+def _depth(left):
+    depth = np.ones(left.shape[0], np.int64)
+    best = 1
+    for k in range(left.shape[0]):  # children always come after their parent
+        if left[k] >= 0:
+            depth[left[k]] = depth[left[k] + 1] = depth[k] + 1
+        best = max(best, depth[k])
+    return best
+
+
+def build(centre: np.ndarray, normal: np.ndarray, radius: np.ndarray, slab: np.ndarray, eps: float,
+          leaf: int = LEAF_SIZE, cluster: int = 1 << 14) -> tuple[DiscTree, np.ndarray, dict]:
+    """The tree over the discs, their data in tree order (gather_discs) and seconds per step."""
+    import time
+
+    t0 = time.perf_counter()
+    centre = np.ascontiguousarray(centre, np.float64)
+    codes = morton_codes(centre)
+    order = np.argsort(codes)  # the tree depends on ties' order, the estimate does not
+    codes = codes[order]
+    disc = gather_discs(order, centre, np.ascontiguousarray(normal, np.float64),
+                        np.ascontiguousarray(radius, np.float64), np.ascontiguousarray(slab, np.float64))
+    t1 = time.perf_counter()
+    left, first, count = _topology(codes, int(leaf))
+    node = np.empty((len(left), 10), np.float32)
+    spread = np.empty(len(left))
+    _leaves(disc, float(eps), left, first, count, node, spread)
+    _inner(left, count, node, spread)
+    tree = DiscTree(order, node, left, first, count, _clusters(left, count, int(cluster)))
+    t2 = time.perf_counter()
+    return tree, disc, {"sort": t1 - t0, "tree": t2 - t1}
