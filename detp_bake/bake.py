@@ -95,10 +95,10 @@ class BakeSettings:
         es = self.estimator_settings
         if es.k < 2:
             bad("k", es.k, "the photon map needs at least 2 neighbours")
-        if es.radius is not None and not es.radius > 0:
-            bad("radius", es.radius, "must be positive (metres)")
-        if not es.radius_texels > 0:
-            bad("radius_texels", es.radius_texels, "must be positive")
+        if es.radius is not None and not (np.isfinite(es.radius) and es.radius > 0):
+            bad("radius", es.radius, "must be a positive, finite number of metres")
+        if not (np.isfinite(es.radius_texels) and es.radius_texels > 0):
+            bad("radius_texels", es.radius_texels, "must be a positive, finite number of texels")
         if not 0.05 <= es.q <= 0.95:
             bad("q", es.q, "the sphere cache ratio must lie between 0.05 and 0.95")
         if es.kernel not in ("constant", "epanechnikov"):
@@ -338,11 +338,12 @@ def _finish(settings, bounces, texels, est, tracer, seconds, direct_e=None, dire
 
 
 def output_paths(result: BakeResult, out_dir: Path) -> dict:
-    out = {name: [out_dir / f"{images.file_stem(name)}.{result.settings.estimator}.{fmt}"
+    stems = images.file_stems(result.images)
+    out = {name: [out_dir / f"{stems[name]}.{result.settings.estimator}.{fmt}"
                   for fmt in result.settings.formats] for name in result.images}
     if result.settings.keep_raw and result.raw_images:
         for name, paths in out.items():
-            paths.append(out_dir / f"{images.file_stem(name)}.{result.settings.estimator}.raw.exr")
+            paths.append(out_dir / f"{stems[name]}.{result.settings.estimator}.raw.exr")
     return out
 
 

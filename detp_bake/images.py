@@ -69,11 +69,33 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
 WRITERS = {"exr": write_exr, "png": write_png}
 
 
+_RESERVED = {"CON", "PRN", "AUX", "NUL", *(f"COM{i}" for i in range(1, 10)), *(f"LPT{i}" for i in range(1, 10))}
+
+
 def file_stem(name: str) -> str:
-    """An object name made safe as a file name on every platform."""
+    """An object name made safe as a file name on every platform (Windows' reserved device names
+    included: `CON` becomes `CON_`)."""
     bad = '<>:"/\\|?*'
     stem = "".join("_" if (ch in bad or ord(ch) < 32) else ch for ch in name).strip(" .")
-    return stem or "object"
+    stem = stem or "object"
+    if stem.split(".")[0].upper() in _RESERVED:
+        stem = stem + "_"
+    return stem
+
+
+def file_stems(names) -> dict:
+    """{name: stem} with every stem unique even on case-insensitive disks: names that would collide
+    (`Wall/1` and `Wall_1`, `Box` and `box`) get `-2`, `-3`, … in the order given."""
+    out, taken = {}, set()
+    for name in names:
+        stem = base = file_stem(name)
+        k = 1
+        while stem.lower() in taken:
+            k += 1
+            stem = f"{base}-{k}"
+        taken.add(stem.lower())
+        out[name] = stem
+    return out
 
 
 def check_writable_dir(path: str | os.PathLike) -> Path:

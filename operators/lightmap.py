@@ -13,12 +13,25 @@ from . import common
 
 
 def _files_for(context, objects, estimator):
+    """Each object's lightmap in the output folder: as report.json maps them (names that collide
+    as file names get distinct files), else by the object's file name."""
     out = common.output_directory(context)
+    mapped = {}
+    try:
+        with open(os.path.join(out, "report.json")) as f:
+            report = json.load(f)
+        if report.get("settings", {}).get("estimator") == estimator:
+            mapped = {o["name"]: [p for p in o.get("files", []) if p.endswith(".exr")] for o in report["objects"]}
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
     found = {}
     for obj in objects:
-        path = os.path.join(out, f"{images.file_stem(obj.name)}.{estimator}.exr")
-        if os.path.isfile(path):
-            found[obj.name] = [path]
+        paths = [p for p in mapped.get(obj.name, []) if os.path.isfile(p)]
+        if not paths:
+            path = os.path.join(out, f"{images.file_stem(obj.name)}.{estimator}.exr")
+            paths = [path] if os.path.isfile(path) else []
+        if paths:
+            found[obj.name] = paths
     return found
 
 

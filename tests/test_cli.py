@@ -3,7 +3,9 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 from conftest import CORNELL, ROOT
@@ -101,3 +103,37 @@ def test_missing_default_uv_layer_is_created_and_said(capsys, tmp_path, empty_bl
     assert code == 0, err
     assert "created UV layer 'Lightmap'" in err and "Floor" in err
     assert (tmp_path / "out" / "Floor.disc_index.exr").exists()
+
+
+def test_names_that_collide_as_file_names_get_distinct_files(tmp_path):
+    """`Wall/1` and `Wall_1`, `Box` and `box` (case-insensitive disks), `..` and `...`, `CON`
+    (Windows): every lightmap gets its own valid file, and report.json says which is whose."""
+    from detp_bake import images
+    from detp_bake.bake import BakeSettings, bake
+    from detp_bake.scene import SunLight
+    from synthetic import grid, make_scene
+    names = ["Wall/1", "Wall_1", "Box", "box", "..", "...", "CON"]
+    parts = [(n, grid(1.0, 1.0, 1, z=0.1 * i), 0.5, True) for i, n in enumerate(names)]
+    sc = make_scene(parts, [SunLight("Sun", np.array([0, 0, -1.0]), np.full(3, 1.0))], resolution=4)
+    result = bake(sc, BakeSettings(photons=2000, bounces=0, denoise=False), tmp_path)
+    stems = images.file_stems(names)
+    assert len({s.lower() for s in stems.values()}) == len(names)
+    assert stems["CON"] == "CON_"
+    files = sorted(p.name for p in tmp_path.iterdir() if p.suffix == ".exr")
+    assert len(files) == len(names)
+    import json
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert sorted(o["name"] for o in report["objects"]) == sorted(names)
+    assert all(len(o["files"]) == 1 and Path(o["files"][0]).is_file() for o in report["objects"])
+    assert result.files["Wall/1"] != result.files["Wall_1"]
+
+
+@pytest.mark.parametrize("option, value", [("--radius-texels", "inf"), ("--radius", "nan"), ("--radius", "inf"),
+                                           ("--target-noise", "nan"), ("--time-limit", "-1")])
+def test_non_finite_settings_are_refused_before_work(tmp_path, option, value, capsys):
+    from detp_bake import cli
+    code = cli.main(["bake", str(CORNELL), "--out", str(tmp_path / "out"), option, value])
+    assert code != 0
+    err = capsys.readouterr().err
+    assert option.lstrip("-").replace("-", "_") in err
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
