@@ -179,6 +179,19 @@ def _log_noise(result) -> None:
              (f" (+{len(worst) - 8} more in report.json)" if len(worst) > 8 else ""))
 
 
+def _paths_relative_to(bpy, files: dict, blend: Path) -> None:
+    """Point the lightmap images at their files relative to the .blend about to be saved (//…),
+    so it opens with its lightmaps from any folder; absolute where no relative path exists."""
+    ours = {os.path.normcase(os.path.abspath(p)) for paths in files.values() for p in paths}
+    for img in bpy.data.images:
+        path = os.path.normcase(os.path.abspath(bpy.path.abspath(img.filepath))) if img.filepath else None
+        if path in ours:
+            try:
+                img.filepath = "//" + Path(os.path.relpath(path, blend.parent)).as_posix()
+            except ValueError:  # another drive
+                img.filepath = path
+
+
 def run_bake(args, bl_scene=None) -> int:
     """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene)."""
     settings = settings_from_args(args)
@@ -188,7 +201,9 @@ def run_bake(args, bl_scene=None) -> int:
     if args.apply:
         blender_scene.apply_all(bl_scene, result.files, args.uv_layer, settings.estimator)
     if args.save:
-        bpy.ops.wm.save_as_mainfile(filepath=str(Path(args.save).resolve()), copy=False)
+        target = Path(args.save).resolve()
+        _paths_relative_to(bpy, result.files, target)
+        bpy.ops.wm.save_as_mainfile(filepath=str(target), copy=False, relative_remap=False)
         print(f"detp_bake: saved {args.save}", file=sys.stderr)
     for name, files in result.files.items():
         for f in files:

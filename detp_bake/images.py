@@ -108,4 +108,6 @@ def check_writable_dir(path: str | os.PathLike) -> Path:
         probe.unlink()
     except OSError as exc:
         raise BakeError(f"output directory '{p}' is not writable: {exc.strerror or exc}") from None
-    return p
+    # Absolute, so that images loaded from it keep pointing at it wherever the .blend is saved
+    # (Blender then stores them relative to the saved file: //lightmaps/…).
+    return p.resolve()

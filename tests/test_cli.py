@@ -23,8 +23,8 @@ def test_python_m_detp_bake_bakes_applies_and_saves(tmp_path, bpy):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     proc = subprocess.run([sys.executable, "-m", "detp_bake", "bake", str(CORNELL), "--objects", "Floor", "TallBox",
                            "--photons", "100000", "--resolution", "32", "--estimator", "photon_map",
-                           "--out", str(out), "--format", "exr,png",
-                           "--apply", "--save", str(saved)], cwd=tmp_path, env=env, capture_output=True, text=True)
+                           "--out", "out", "--format", "exr,png",  # relative: resolved against the cwd
+                           "--apply", "--save", "baked.blend"], cwd=tmp_path, env=env, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     assert "Tracing" in proc.stderr
     report = json.loads((out / "report.json").read_text())
@@ -36,9 +36,13 @@ def test_python_m_detp_bake_bakes_applies_and_saves(tmp_path, bpy):
     for name in ("Floor.photon_map.exr", "Floor.photon_map.png", "TallBox.photon_map.exr"):
         assert (out / name).stat().st_size > 0
     assert not list(out.glob(".*partial*"))
+    # Opened from elsewhere, the saved file finds its lightmaps: paths are stored relative to it.
+    os.chdir(ROOT)
     bpy.ops.wm.open_mainfile(filepath=str(saved))
     mat = bpy.data.objects["Floor"].material_slots[0].material
     assert "detp_bake lightmap" in mat.node_tree.nodes
+    img = bpy.data.images["Floor.photon_map"]
+    assert img.filepath.startswith("//out") and img.size[0] == 32
 
 
 @pytest.mark.parametrize("extra, message", [
