@@ -14,7 +14,8 @@ import bpy
 import numpy as np
 
 from .errors import BakeError
-from .scene import AreaLight, BakeObject, PointLight, Scene, SpotLight, SunLight
+from .blender_eval import Collector, flatten, holdout, instancers, render_evaluation, rendered_names
+from .scene import Scene
 
 FRAME_NAME = "detp_bake lightmap"
 REVERT_KEY = "detp_bake_revert"
@@ -29,10 +30,6 @@ def _has_nodes(idblock) -> bool:
     if idblock.node_tree is None:
         return False
     return bpy.app.version >= (5, 0, 0) or bool(idblock.use_nodes)
-
-
-def _is_visible(obj) -> bool:
-    return obj.visible_get() and not obj.hide_render
 
 
 def _socket(node, *names):
@@ -136,72 +133,6 @@ def remove_uv_layers(bl_scene, created: Iterable) -> None:
             obj.data.uv_layers.remove(obj.data.uv_layers[layer])
 
 
-def _mesh_arrays(obj, depsgraph, uv_name: Optional[str]):
-    """World-space triangles, corner normals, lightmap UVs and material index of one object."""
-    ev = obj.evaluated_get(depsgraph)
-    me = ev.to_mesh()
-    try:
-        me.calc_loop_triangles()
-        nt = len(me.loop_triangles)
-        co = np.empty(len(me.vertices) * 3, np.float64)
-        me.vertices.foreach_get("co", co)
-        tri_v = np.empty(nt * 3, np.int64)
-        me.loop_triangles.foreach_get("vertices", tri_v)
-        tri_l = np.empty(nt * 3, np.int64)
-        me.loop_triangles.foreach_get("loops", tri_l)
-        mat_index = np.empty(nt, np.int64)
-        me.loop_triangles.foreach_get("material_index", mat_index)
-        corner_n = np.empty(len(me.loops) * 3, np.float64)
-        me.corner_normals.foreach_get("vector", corner_n)
-        uv = np.zeros((len(me.loops), 2))
-        if uv_name is not None and uv_name in me.uv_layers:
-            flat = np.empty(len(me.loops) * 2, np.float64)
-            me.uv_layers[uv_name].uv.foreach_get("vector", flat)
-            uv = flat.reshape(-1, 2)
-    finally:
-        ev.to_mesh_clear()
-    m = np.array(obj.matrix_world, float)
-    pos = co.reshape(-1, 3)[tri_v.reshape(-1, 3)] @ m[:3, :3].T + m[:3, 3]
-    nm = np.linalg.inv(m[:3, :3]).T
-    nrm = corner_n.reshape(-1, 3)[tri_l.reshape(-1, 3)] @ nm.T
-    nrm /= np.maximum(np.linalg.norm(nrm, axis=2, keepdims=True), 1e-30)
-    uvs = uv[tri_l.reshape(-1, 3)]
-    # Drop zero-area triangles: they carry no light and confuse the rasteriser.
-    area = np.linalg.norm(np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]), axis=1)
-    keep = area > 1e-12
-    return pos[keep], nrm[keep], uvs[keep], mat_index[keep]
-
-
-def _light(obj) -> Optional[object]:
-    light = obj.data
-    m = np.array(obj.matrix_world, float)
-    colour = np.array(light.color[:3], float)
-    energy = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
-    if not getattr(light, "normalize", True):
-        # Unnormalised lights keep their radiance as the size changes (measured in Cycles).
-        if light.type in ("POINT", "SPOT"):
-            r = float(light.shadow_soft_size)
-            energy *= 4.0 * np.pi * r * r if r > 0 else 4.0
-        elif light.type == "AREA":
-            sx = float(light.size) * float(np.linalg.norm(m[:3, 0]))
-            sy = float(light.size if light.shape in ("SQUARE", "DISK") else light.size_y) * \
-                float(np.linalg.norm(m[:3, 1]))
-            energy *= sx * sy * (np.pi / 4 if light.shape in ("DISK", "ELLIPSE") else 1.0)
-    power = colour * energy
-    axis = m[:3, :3] @ np.array([0.0, 0.0, -1.0])
-    axis /= max(np.linalg.norm(axis), 1e-30)
-    if light.type == "POINT":
-        return PointLight(obj.name, m[:3, 3], power, float(light.shadow_soft_size))
-    if light.type == "SPOT":
-        return SpotLight(obj.name, m[:3, 3], axis, power, float(light.spot_size),
-                         float(light.spot_blend), float(light.shadow_soft_size))
-    if light.type == "SUN":
-        return SunLight(obj.name, axis, power, float(light.angle))
-    if light.type == "AREA":
-        return AreaLight(obj.name, m, light.shape, float(light.size), float(light.size_y), power)
-    return None
-
-
 def _world_radiance(world) -> np.ndarray:
     if world is None:
         return np.zeros(3)
@@ -225,33 +156,48 @@ def scene_bounces(bl_scene) -> int:
     return int(min(cycles.diffuse_bounces, cycles.max_bounces))
 
 
-def export_scene(bl_scene, depsgraph, objects: Optional[Iterable[str]] = None,
+def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = None,
                  uv_layer=None, resolution=0, log: Callable[[str], None] = print,
-                 created: Optional[list] = None) -> Scene:
-    """Every visible mesh becomes geometry; `objects` (default: all of them) get lightmaps.
+                 created: Optional[list] = None, max_bytes: Optional[int] = None) -> Scene:
+    """The scene as F12 renders it (`render_evaluation`): every rendered mesh, curve, surface, text
+    and metaball, and every instance of one, is geometry in world space; `objects` (default: every
+    rendered mesh object) get lightmaps, and must be real mesh objects. `depsgraph` only names the
+    view layer (default: the context's); a render depsgraph is used as it is.
 
     `uv_layer` names the lightmap UV layer: one name for all, or {object name: layer} for some; a
     named layer must exist. Objects with no name given use DEFAULT_UV, created by Lightmap Pack
     where missing (said through `log`, and listed in `created` as (object, layer) so a cancelled
-    bake can remove it again). `resolution` is one size for all or {object name: size}."""
-    meshes = [o for o in bl_scene.objects if o.type == "MESH" and _is_visible(o)]
+    bake can remove it again). `resolution` is one size for all or {object name: size}.
+    `max_bytes` limits the flattened geometry (BakeError naming the biggest contributors)."""
+    view_layer = depsgraph.view_layer if depsgraph is not None else bpy.context.view_layer
+    rendered = rendered_names(view_layer)
     if objects is None:
-        targets = list(meshes)
+        targets = [o for o in bl_scene.objects if o.type == "MESH" and o.name in rendered
+                   and not holdout(o, view_layer)]
     else:
         targets = []
         for name in objects:
             obj = bl_scene.objects.get(name)
-            if obj is None:
-                raise BakeError(f"object '{name}' is not in scene '{bl_scene.name}'")
+            if obj is None or obj.name not in rendered:
+                owners = render_evaluation(bl_scene, view_layer, instancers(name))
+                if owners:
+                    raise BakeError(f"object '{name}' is only an instance (in {', '.join(sorted(owners)[:3])}): "
+                                    "lightmaps are baked on real mesh objects; make it real (Object › Apply › "
+                                    "Make Instances Real) to bake one for it")
+                if obj is None:
+                    raise BakeError(f"object '{name}' is not in scene '{bl_scene.name}'")
+                raise BakeError(f"object '{name}' is not rendered (Disable in Renders, or its collection is "
+                                f"excluded from view layer '{view_layer.name}' or disabled in renders)")
             if obj.type != "MESH":
-                raise BakeError(f"object '{name}' is a {obj.type.lower()}, not a mesh: it cannot be baked")
-            if obj not in meshes:
-                raise BakeError(f"object '{name}' is hidden: unhide it to bake it")
+                raise BakeError(f"object '{name}' is a {obj.type.lower()}, not a mesh: convert it to a mesh "
+                                "to bake a lightmap for it")
+            if holdout(obj, view_layer):
+                raise BakeError(f"object '{name}' is a holdout, which Cycles bakes black: turn Holdout off "
+                                "to bake it")
             targets.append(obj)
     if not targets:
-        raise BakeError(f"scene '{bl_scene.name}' has no visible mesh object to bake")
+        raise BakeError(f"scene '{bl_scene.name}' has no rendered mesh object to bake")
     named = uv_layer if isinstance(uv_layer, dict) else {o.name: uv_layer for o in targets if uv_layer}
-    sizes = resolution if isinstance(resolution, dict) else {}
     for obj in targets:
         layer = named.get(obj.name)
         if layer is not None and layer not in obj.data.uv_layers:
@@ -262,32 +208,24 @@ def export_scene(bl_scene, depsgraph, objects: Optional[Iterable[str]] = None,
             log(f"object '{obj.name}': created UV layer '{layers[obj.name]}' with Lightmap Pack")
             if created is not None:
                 created.append((obj.name, layers[obj.name]))
-    depsgraph.update()
 
-    pos, nrm, uvs, alb, emi, objs = [], [], [], [], [], []
-    first = 0
-    for obj in meshes:
-        p, n, u, mi = _mesh_arrays(obj, depsgraph, layers.get(obj.name))
-        slots = [s.material for s in obj.material_slots] or [None]
-        table = [material_albedo_emission(m) for m in slots]
-        mi = np.clip(mi, 0, len(table) - 1)
-        alb.append(np.array([t[0] for t in table])[mi] if len(p) else np.zeros((0, 3)))
-        emi.append(np.array([t[1] for t in table])[mi] if len(p) else np.zeros((0, 3)))
-        pos.append(p)
-        nrm.append(n)
-        uvs.append(u)
-        bake = obj.name in layers
-        if bake and len(p) == 0:
-            raise BakeError(f"object '{obj.name}' has no faces to bake")
-        size = sizes.get(obj.name, 0) if isinstance(resolution, dict) else int(resolution or 0)
-        objs.append(BakeObject(obj.name, first, len(p), size, bake))
-        first += len(p)
-    lights = [l for l in (_light(o) for o in bl_scene.objects if o.type == "LIGHT" and _is_visible(o))
-              if l is not None]
-    return Scene(positions=np.concatenate(pos), normals=np.concatenate(nrm),
-                 uvs=np.concatenate(uvs), albedo=np.concatenate(alb), emission=np.concatenate(emi),
-                 objects=objs, lights=lights, world=_world_radiance(bl_scene.world),
-                 default_bounces=scene_bounces(bl_scene))
+    collector = Collector(layers, log, material_albedo_emission)
+    if depsgraph is not None and depsgraph.mode == "RENDER":
+        collector(depsgraph)
+    else:
+        render_evaluation(bl_scene, view_layer, collector)
+    for name in layers:
+        if name not in collector.found:
+            raise BakeError(f"object '{name}' is not in the render (F12 does not show it), so it cannot be baked")
+    for reason, names in collector.left_out.items():
+        log(f"left out ({reason}): {', '.join(names[:5])}" + (f" and {len(names) - 5} more" if len(names) > 5 else ""))
+    (pos, nrm, uvs, alb, emi), objs, stats = flatten(collector, resolution, max_bytes)
+    scene = Scene(positions=pos, normals=nrm, uvs=uvs, albedo=alb, emission=emi, objects=objs,
+                  lights=collector.lights, world=_world_radiance(bl_scene.world),
+                  default_bounces=scene_bounces(bl_scene))
+    scene.export_stats = stats
+    return scene
+
 
 
 # --------------------------------------------------------------------------- images and materials
