@@ -146,6 +146,45 @@ def test_collection_instance_casts_a_shadow_like_cycles(empty_blend, bpy, direct
                                                       ("InstB (instances)", False)]
 
 
+def test_geometry_nodes_and_particle_instances_cast_shadows_like_cycles(empty_blend, bpy):
+    """Instance on Points (geometry nodes) over a grid's four corners, and a particle system whose
+    emitter is not rendered but whose instanced boxes are: all of them shadow the floor."""
+    from blender_helpers import plane_object
+    _floor(bpy, 4.0)
+    carrier = plane_object(bpy, "Carrier", 1.6, (0.8, 0.0, 1.0))
+    tree = bpy.data.node_groups.new("Scatter", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    n_in, n_out = tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput")
+    points, place = tree.nodes.new("GeometryNodeMeshToPoints"), tree.nodes.new("GeometryNodeInstanceOnPoints")
+    cube = tree.nodes.new("GeometryNodeMeshCube")
+    cube.inputs["Size"].default_value = (0.4, 0.4, 0.4)
+    tree.links.new(n_in.outputs[0], points.inputs["Mesh"])
+    tree.links.new(points.outputs["Points"], place.inputs["Points"])
+    tree.links.new(cube.outputs["Mesh"], place.inputs["Instance"])
+    tree.links.new(place.outputs["Instances"], n_out.inputs[0])
+    carrier.modifiers.new("Scatter", "NODES").node_group = tree
+    props = bpy.data.collections.new("Props")
+    box = _box(bpy, "Grain", 0.3, (0, 0, 0), collection=props)
+    emitter = plane_object(bpy, "Emitter", 1.2, (-1.0, 0.0, 1.2))
+    emitter.modifiers.new("Hair", "PARTICLE_SYSTEM")
+    ps = emitter.particle_systems[0].settings
+    ps.type, ps.count, ps.hair_length = "HAIR", 6, 0.2
+    ps.render_type, ps.instance_object, ps.particle_size = "OBJECT", box, 1.0
+    emitter.show_instancer_for_render = False
+    _light(bpy, "Sun", "SUN", energy=3.0)
+    ours, theirs, sc = _versus_cycles(bpy, SUN_ONLY)
+    print(f"geometry nodes and particles: ours {ours.mean():.4f}, Cycles {theirs.mean():.4f}")
+    _shadow_matches(ours, theirs)
+    names = {o.name: o.triangle_count for o in sc.objects}
+    assert names["Carrier (instances)"] == 4 * 12 and names["Emitter (instances)"] == 6 * 12
+    assert "Emitter" not in names and "Carrier" not in names  # neither renders its own faces
+    st = sc.export_stats
+    assert st["instances"] == 10 and st["instanced_triangles"] == 120
+    # Extracted once each: floor, the carrier's own (empty) mesh, the node cube, the grain box.
+    assert st["shared_geometries"] == 4 and st["shared_triangles"] == 2 + 0 + 12 + 12
+
+
 def test_only_an_instance_cannot_be_baked(empty_blend, bpy):
     from blender_helpers import export
     _floor(bpy)
