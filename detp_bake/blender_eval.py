@@ -157,13 +157,18 @@ def _extract(ob, uv_name: Optional[str]) -> _Geometry:
 
 
 def _place(g: _Geometry, m: np.ndarray):
-    """World-space corners and unit corner normals of `g` under the 4×4 matrix `m`, and the mask of
-    triangles with an area (zero-area ones carry no light and confuse the rasteriser)."""
-    pos = g.co[g.tri] @ m[:3, :3].T + m[:3, 3]
-    if not abs(np.linalg.det(m[:3, :3])) > 0.0:  # a zero scale: nothing has an area
-        return pos, g.normals.copy(), np.zeros(len(pos), bool)
-    nrm = g.normals @ np.linalg.inv(m[:3, :3])
-    nrm /= np.maximum(np.linalg.norm(nrm, axis=2, keepdims=True), 1e-30)
+    """World-space corners and unit corner normals of `g` under each of the (n, 4, 4) matrices `m`,
+    instance after instance, and the mask of triangles with an area (zero-area ones carry no light
+    and confuse the rasteriser). Normals go through the cofactor matrix det(A)·A⁻ᵀ, flipped where
+    det(A) < 0: no matrix inverse per instance, and a flattened instance keeps its normals."""
+    a, t = m[:, :3, :3], m[:, :3, 3]
+    pos = np.einsum("nij,tkj->ntki", a, g.co[g.tri]) + t[:, None, None, :]
+    c0, c1, c2 = a[:, :, 0], a[:, :, 1], a[:, :, 2]
+    cof = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=2)
+    cof *= np.where(np.einsum("ni,ni->n", c0, cof[:, :, 0]) < 0.0, -1.0, 1.0)[:, None, None]
+    nrm = np.einsum("nij,tkj->ntki", cof, g.normals)
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=3, keepdims=True), 1e-30)
+    pos, nrm = pos.reshape(-1, 3, 3), nrm.reshape(-1, 3, 3)
     area = np.linalg.norm(np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]), axis=1)
     return pos, nrm, area > 1e-12
 
@@ -261,14 +266,14 @@ class Collector:
         self._rows: dict = {}
 
     def _material_rows(self, mats):
-        albedo, emission = [], []
-        for mat in mats or [None]:
-            key = mat.original.as_pointer() if mat is not None else 0
-            if key not in self._rows:
-                self._rows[key] = self.material_rows(mat.original if mat is not None else None)
-            albedo.append(self._rows[key][0])
-            emission.append(self._rows[key][1])
-        return np.array(albedo, float).reshape(-1, 3), np.array(emission, float).reshape(-1, 3)
+        """(albedo, emission) rows per slot; the same pair of arrays for the same materials."""
+        mats = [m.original if m is not None else None for m in mats or [None]]
+        keys = tuple(m.as_pointer() if m is not None else 0 for m in mats)
+        if keys not in self._rows:
+            rows = [self.material_rows(m) for m in mats]
+            self._rows[keys] = (np.array([r[0] for r in rows], float).reshape(-1, 3),
+                                np.array([r[1] for r in rows], float).reshape(-1, 3))
+        return self._rows[keys]
 
     def _skip(self, reason: str, name: str) -> None:
         names = self.left_out.setdefault(reason, [])
@@ -345,21 +350,26 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int]):
     instances = instanced_tris = 0
     for (owner, bake), recs in groups.items():
         start = first
+        batches: dict = {}  # placements that share geometry and materials are placed together
         for _, key, m, albedo, emission, _, emissive_only, (_, parent) in recs:
-            g = c.geometry[key]
-            p, n, keep = _place(g, m)
-            mi = np.clip(g.material, 0, len(albedo) - 1)
+            batches.setdefault((key, id(albedo), emissive_only, parent is not None),
+                               (albedo, emission, []))[2].append(m)
+        for (key, _, emissive_only, instanced), (albedo, emission, ms) in batches.items():
+            g, n_inst = c.geometry[key], len(ms)
+            p, n, keep = _place(g, np.array(ms))
+            mi = np.tile(np.clip(g.material, 0, len(albedo) - 1), n_inst)
             a, e = albedo[mi], emission[mi]
             if emissive_only:
                 keep &= np.any(e != 0.0, axis=1)
             pos.append(p[keep])
             nrm.append(n[keep])
-            uvs.append(g.uvs[keep] if g.uvs is not None else np.zeros((int(keep.sum()), 3, 2)))
+            uvs.append(np.tile(g.uvs, (n_inst, 1, 1))[keep] if g.uvs is not None
+                       else np.zeros((int(keep.sum()), 3, 2)))
             alb.append(a[keep])
             emi.append(e[keep])
             first += int(keep.sum())
-            if parent is not None:
-                instances += 1
+            if instanced:
+                instances += n_inst
                 instanced_tris += int(keep.sum())
         if bake and first == start:
             raise BakeError(f"object '{owner}' has no faces to bake")

@@ -185,6 +185,30 @@ def test_geometry_nodes_and_particle_instances_cast_shadows_like_cycles(empty_bl
     assert st["shared_geometries"] == 4 and st["shared_triangles"] == 2 + 0 + 12 + 12
 
 
+@pytest.mark.parametrize("scale", [(1.0, 2.0, 0.5), (-1.0, 1.0, 1.0), (0.0, 1.0, 1.0)])
+def test_instance_transforms_keep_normals_outward(empty_blend, bpy, scale):
+    """Scaled, mirrored and flattened instances: corner normals still point out of the box (they
+    go through the inverse transpose); flattened to zero width, only the two faces across it stay."""
+    from blender_helpers import export
+    _floor(bpy)
+    props = bpy.data.collections.new("Props")
+    _box(bpy, "Box", 0.8, (0, 0, 0), collection=props)
+    inst = bpy.data.objects.new("Inst", None)
+    inst.instance_type, inst.instance_collection = "COLLECTION", props
+    inst.location, inst.scale, inst.rotation_euler = (0.3, -0.2, 1.0), scale, (0.3, 0.2, 0.1)
+    empty_blend.collection.objects.link(inst)
+    _light(bpy, "Sun", "SUN")
+    sc = export(bpy, objects=["Floor"])
+    box = sc.object_named("Inst (instances)").triangles
+    p, n = sc.positions[box], sc.normals[box]
+    assert np.allclose(np.linalg.norm(n, axis=2), 1.0)
+    if scale[0] == 0.0:
+        assert len(p) == 4
+        return
+    outward = p.mean(axis=1) - np.array([0.3, -0.2, 1.0])
+    assert np.all(np.einsum("tkj,tj->tk", n, outward) > 0)
+
+
 def test_only_an_instance_cannot_be_baked(empty_blend, bpy):
     from blender_helpers import export
     _floor(bpy)
