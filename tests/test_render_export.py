@@ -361,6 +361,38 @@ def test_broken_light_setting_is_named_before_any_work(empty_blend, bpy, tmp_pat
         export(bpy, objects=["Floor"])
 
 
+def test_infinite_power_fails_the_command_line_and_writes_nothing(empty_blend, bpy, tmp_path, capsys):
+    """Issue 8 found a light of infinite power baking black with exit 0: now exit 2, the light and
+    the setting named, and no file written."""
+    from detp_bake import cli
+    _floor(bpy)
+    _light(bpy, "Lamp", "POINT", location=(0, 0, 2), energy=float("inf"))
+    path = tmp_path / "inf.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    code = cli.main(["bake", str(path), "--out", str(tmp_path / "out"), "--photons", "1000"])
+    assert code == 2
+    assert "light 'Lamp': power is infinite" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_flattened_geometry_over_the_budget_names_the_biggest(empty_blend, bpy):
+    from detp_bake import blender_scene
+    _floor(bpy)
+    props = bpy.data.collections.new("Props")
+    _box(bpy, "Box", 0.3, (0, 0, 0), collection=props)
+    for i in range(3):
+        inst = bpy.data.objects.new(f"Inst{i}", None)
+        inst.instance_type, inst.instance_collection = "COLLECTION", props
+        inst.location = (i - 1.0, 0.0, 1.0)
+        empty_blend.collection.objects.link(inst)
+    _light(bpy, "Sun", "SUN")
+    export = blender_scene.export_scene
+    sc = export(empty_blend, None, ["Floor"], log=lambda m: None, max_bytes=38 * 240)
+    assert sc.triangle_count == 38
+    with pytest.raises(BakeError, match="38 triangles.*the biggest: 'Box' ×1 in 'Inst0' \\(12 triangles\\)"):
+        export(empty_blend, None, ["Floor"], log=lambda m: None, max_bytes=37 * 240)
+
+
 def test_export_leaves_the_file_as_it_was(empty_blend, bpy):
     """Nothing the export reads through the render evaluation is left changed: scenes, images,
     render settings, modifier and visibility flags, selection, and no engine stays registered."""
