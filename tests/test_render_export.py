@@ -346,6 +346,42 @@ def test_negative_light_matches_cycles(empty_blend, bpy):
     assert sorted(l.power[0] for l in sc.lights) == [-150.0, 300.0]
 
 
+def test_instanced_light_colour_temperature_nodes_and_exposure_match_cycles(empty_blend, bpy):
+    """A point light inside a collection that only an Empty instances (twice, by two Empties), with a
+    blackbody temperature, a node tree's Emission colour and strength, and an exposure: each
+    channel's mean as in Cycles."""
+    _floor(bpy, 4.0)
+    lamps = bpy.data.collections.new("Lamps")
+    data = bpy.data.lights.new("Bulb", "POINT")
+    data.energy, data.exposure = 100.0, 1.0
+    data.use_temperature, data.temperature = True, 3500.0
+    if bpy.app.version < (5, 0, 0):
+        data.use_nodes = True
+    else:
+        with pytest.warns(DeprecationWarning):
+            data.use_nodes = True  # creates the node tree, which Blender 5 always uses
+    emission = next(n for n in data.node_tree.nodes if n.type == "EMISSION")
+    emission.inputs["Color"].default_value = (0.4, 1.0, 0.7, 1.0)
+    emission.inputs["Strength"].default_value = 1.5
+    lamps.objects.link(bpy.data.objects.new("Bulb", data))
+    for name, x in (("LampA", -0.8), ("LampB", 0.9)):
+        inst = bpy.data.objects.new(name, None)
+        inst.instance_type, inst.instance_collection = "COLLECTION", lamps
+        inst.location = (x, 0.2, 1.2)
+        empty_blend.collection.objects.link(inst)
+    from blender_helpers import export
+    from detp_bake import blender_scene
+    sc = export(bpy, objects=["Floor"], resolution=32)
+    ref = blender_scene.cycles_bake(empty_blend, ["Floor"], resolution=32, samples=128, bounces=0)["Floor"]
+    r = compute(sc, SUN_ONLY)
+    m = r.centre_masks["Floor"]
+    ours, theirs = r.images["Floor"][m].mean(axis=0), ref[m].mean(axis=0)
+    print(f"instanced coloured light: ours {ours}, Cycles {theirs}")
+    assert sorted(l.name for l in sc.lights) == ["LampA/Bulb", "LampB/Bulb"]
+    assert sc.export_stats["instanced_lights"] == 2
+    assert np.allclose(ours, theirs, rtol=0.02)
+
+
 @pytest.mark.parametrize("setting, value, message", [
     ("energy", float("inf"), "light 'Lamp': power is infinite"),
     ("energy", float("nan"), "light 'Lamp': power is not a number"),
