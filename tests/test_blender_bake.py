@@ -174,7 +174,7 @@ def test_every_light_type_matches_cycles(empty_blend, bpy, case, direct):
     plane_object(bpy, "Receiver", 4.0, (0, 0, 0), material=principled(bpy, "Grey", base=(0.5, 0.5, 0.5)))
     sc = export(bpy, objects=["Receiver"], resolution=32)
     ref = blender_scene.cycles_bake(empty_blend, ["Receiver"], resolution=32, samples=128, bounces=0)["Receiver"]
-    r = compute(sc, BakeSettings(photons=1_000_000, bounces=0, direct=direct, direct_samples=64,
+    r = compute(sc, BakeSettings(photons=1_000_000, bounces=0, direct=direct, direct_samples=64, denoise=False,
                                  estimator_settings=EstimatorSettings(radius_texels=1.0)))
     m = r.centre_masks["Receiver"]
     ours, theirs = r.images["Receiver"][m], ref[m]
@@ -182,6 +182,10 @@ def test_every_light_type_matches_cycles(empty_blend, bpy, case, direct):
     print(f"{case} ({direct}): mean {ours.mean() / theirs.mean() - 1:+.3%}, texel relative RMSE {rmse:.3f}")
     # Shadow rays have no disc blur and no photon noise: they match Cycles far more closely.
     mean_tol, rmse_tol = (0.005, 0.03) if direct == "sampled" else (0.03, 0.12)
+    if case == "spot_blend" and bpy.app.version >= (5, 0, 0):
+        # Cycles 5 smooths a spot's rim over a zone about 8 % wider than Cycles 4.5 and we do
+        # (measured; README, Units): up to 9 % apart on the outermost texels, 3.2 % RMSE here.
+        rmse_tol = max(rmse_tol, 0.04)
     assert abs(ours.mean() / theirs.mean() - 1) < mean_tol
     assert rmse < rmse_tol
 
