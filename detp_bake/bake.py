@@ -179,7 +179,19 @@ def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[P
 def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional[Callable[[Progress], None]] = None,
                  cancel=None) -> dict:
     """Like `compute`, for several estimators fed the very same photons: every batch goes to each
-    of them as it is traced. Returns {estimator name: BakeResult}."""
+    of them as it is traced. Returns {estimator name: BakeResult}. `settings.threads` (0: all
+    cores) holds for tracing, shadow rays and the compiled estimators alike."""
+    import numba
+    before = numba.get_num_threads()
+    if settings.threads:
+        numba.set_num_threads(max(1, min(int(settings.threads), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        return _compute_many(scene, settings, names, progress, cancel)
+    finally:
+        numba.set_num_threads(before)
+
+
+def _compute_many(scene, settings, names, progress, cancel) -> dict:
     names = list(dict.fromkeys(names))
     for name in names:
         replace(settings, estimator=name).validate()

@@ -74,3 +74,26 @@ def test_every_batch_shares_photons_between_lights_by_flux():
     per_light = [flux[:k].sum() for k in (schedule._full[0],)]
     assert np.isclose(per_light[0] / flux.sum(), emitters[0].weight / sum(e.weight for e in emitters), rtol=1e-9)
     assert schedule.share(3) == pytest.approx(3000 / 10_500)
+
+
+def test_the_threads_setting_reaches_the_compiled_estimators():
+    """threads=1 runs numba's parallel loops on one thread for the bake, and leaves the setting
+    as it was afterwards; the result is the same bit for bit as on all threads."""
+    import numba
+    from detp_bake import bake as bake_mod
+    seen = []
+    original = bake_mod._compute_many
+
+    def spy(*args, **kw):
+        seen.append(numba.get_num_threads())
+        return original(*args, **kw)
+    sc, _ = _sphere()
+    before = numba.get_num_threads()
+    bake_mod._compute_many = spy
+    try:
+        one = compute(sc, BakeSettings(photons=50_000, bounces=2, threads=1, denoise=False))
+        every = compute(sc, BakeSettings(photons=50_000, bounces=2, denoise=False))
+    finally:
+        bake_mod._compute_many = original
+    assert seen == [1, before] and numba.get_num_threads() == before
+    assert np.array_equal(one.value, every.value)
