@@ -326,9 +326,10 @@ class Collector:
         return self
 
 
-def flatten(c: Collector, resolution, max_bytes: Optional[int]):
+def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = True):
     """World-space arrays, one BakeObject per owner (an object, or all instances of one instancer),
-    and the export statistics. Raises BakeError past `max_bytes` before building anything big."""
+    and the export statistics. Raises BakeError past `max_bytes` before building anything big, and
+    for a bake target without faces (`strict`; otherwise it is just not baked)."""
     counts: dict = {}
     for owner, key, *_, source in c.records:
         entry = counts.setdefault(source, [0, 0])
@@ -371,7 +372,7 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int]):
             if instanced:
                 instances += n_inst
                 instanced_tris += int(keep.sum())
-        if bake and first == start:
+        if bake and first == start and strict:
             raise BakeError(f"object '{owner}' has no faces to bake")
         if first == start:
             continue

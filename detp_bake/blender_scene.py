@@ -216,10 +216,12 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
         render_evaluation(bl_scene, view_layer, collector)
     for name in layers:
         if name not in collector.found:
-            raise BakeError(f"object '{name}' is not in the render (F12 does not show it), so it cannot be baked")
+            if objects is not None:
+                raise BakeError(f"object '{name}' is not in the render (F12 does not show it), so it cannot be baked")
+            log(f"object '{name}' is not in the render (F12 does not show its own faces): not baked")
     for reason, names in collector.left_out.items():
         log(f"left out ({reason}): {', '.join(names[:5])}" + (f" and {len(names) - 5} more" if len(names) > 5 else ""))
-    (pos, nrm, uvs, alb, emi), objs, stats = flatten(collector, resolution, max_bytes)
+    (pos, nrm, uvs, alb, emi), objs, stats = flatten(collector, resolution, max_bytes, strict=objects is not None)
     scene = Scene(positions=pos, normals=nrm, uvs=uvs, albedo=alb, emission=emi, objects=objs,
                   lights=collector.lights, world=_world_radiance(bl_scene.world),
                   default_bounces=scene_bounces(bl_scene))

@@ -183,6 +183,11 @@ def test_geometry_nodes_and_particle_instances_cast_shadows_like_cycles(empty_bl
     assert st["instances"] == 10 and st["instanced_triangles"] == 120
     # Extracted once each: floor, the carrier's own (empty) mesh, the node cube, the grain box.
     assert st["shared_geometries"] == 4 and st["shared_triangles"] == 2 + 0 + 12 + 12
+    # Baking every mesh: neither the carrier (no faces of its own) nor the hidden emitter is baked.
+    from blender_helpers import export
+    assert [o.name for o in export(bpy).objects if o.bake] == ["Floor"]
+    with pytest.raises(BakeError, match="object 'Emitter' is not in the render"):
+        export(bpy, objects=["Emitter"])
 
 
 @pytest.mark.parametrize("scale", [(1.0, 2.0, 0.5), (-1.0, 1.0, 1.0), (0.0, 1.0, 1.0)])
