@@ -17,7 +17,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from . import __version__, denoise as denoise_mod, direct as direct_mod, estimators, images, texels as texels_mod
+from . import __version__, denoise as denoise_mod, direct as direct_mod, estimators, images, memory, \
+    texels as texels_mod
 from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
@@ -27,7 +28,6 @@ from .scene import Scene
 MAX_PHOTONS = 1_000_000_000
 MAX_RESOLUTION = 16384
 MAX_BOUNCES = 1024
-HIT_BYTES = 52  # one stored photon-map hit: position, direction, flux, normal (float32), triangle
 DIRECT_MODES = ("sampled", "photons")
 MAX_DIRECT_SAMPLES = 4096
 
@@ -128,6 +128,7 @@ class BakeResult:
     files: dict = field(default_factory=dict)  # object name -> [paths]
     direct: dict = field(default_factory=dict)  # how direct light was found (report.json)
     noise: dict = field(default_factory=dict)  # object name -> relative noise of its lightmap
+    memory: dict = field(default_factory=dict)  # the estimate made before work, and the peak used
     raw_images: dict = field(default_factory=dict)  # object name -> image before denoising (when denoised)
     warnings: list = field(default_factory=list)
     stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit
@@ -156,6 +157,7 @@ class BakeResult:
             "direct": self.direct,
             "noise": {name: round(100.0 * v, 3) for name, v in self.noise.items()},  # per cent
             "stopped_by": self.stopped_by,
+            "memory": self.memory,
             "denoised": bool(self.raw_images),
             "warnings": list(self.warnings),
             "seconds": self.seconds,
@@ -204,6 +206,12 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
         if obj.bake and obj.resolution <= 0:
             obj.resolution = settings.resolution
     sampled = settings.direct == "sampled"
+    first = 1 if sampled else 0  # the first flight is direct light, left out when sampled
+    survival = float(np.mean(np.clip(scene.albedo, 0.0, 1.0).max(axis=1))) if scene.triangle_count else 0.0
+    per_photon = memory.segments_per_photon(survival, bounces)
+    per_photon_kept = memory.segments_per_photon(survival, bounces, first)
+    batch_size = memory.batch_photons(settings.batch_size, per_photon)
+    need = _check_memory(scene, settings, names, batch_size, per_photon, per_photon_kept)
     t0 = time.perf_counter()
     texels = texels_mod.rasterise(scene)
     rasterise_seconds = time.perf_counter() - t0
@@ -214,7 +222,7 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
         from .estimators.discs import disc_radius
         reach = float(np.max(disc_radius(texels, settings.estimator_settings)))
     caster = RayCaster(scene.positions)
-    tracer = PhotonTracer(scene, settings.photons, bounces, settings.seed, settings.batch_size, settings.threads,
+    tracer = PhotonTracer(scene, settings.photons, bounces, settings.seed, batch_size, settings.threads,
                           indirect_only=sampled, caster=caster, margin=reach)
     direct_e, direct_info = None, {"mode": settings.direct}
     if sampled:
@@ -231,9 +239,7 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
             raise BakeCancelled()
         report(Progress("estimate", fraction, f"Estimating {100 * fraction:.0f} %"))
 
-    mean_albedo = float(np.clip(scene.albedo.mean(), 0.0, 0.999)) if scene.triangle_count else 0.0
-    first = 1 if sampled else 0  # the first flight is direct light, left out when sampled
-    expected_segments = int(tracer.photons * sum(mean_albedo ** b for b in range(first, min(bounces, 64) + 1)))
+    expected_segments = int(tracer.photons * per_photon_kept)
     clearance = None
     t0 = time.perf_counter()
     if any(name != "photon_map" for name in names):
@@ -244,11 +250,6 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
     clearance_seconds = time.perf_counter() - t0
     context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
                                  clearance=clearance)
-    stored_mb = expected_segments * HIT_BYTES / 1e6
-    if "photon_map" in names and settings.memory_budget_mb and stored_mb > settings.memory_budget_mb:
-        raise BakeError(f"the photon map would keep about {stored_mb:,.0f} MB of photon hits, over the memory "
-                        f"budget of {settings.memory_budget_mb:,} MB: use a DETP estimator (they stream "
-                        "photons) or fewer photons")
     runs, build = {}, {}
     for name in names:
         report(Progress("prepare", 0.5, f"Preparing {name}"))
@@ -311,6 +312,9 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
                          direct_e, direct_info)
         result.stopped_by = stopped_by
         result.share = share
+        result.memory = {"estimate_mb": round(need.total / 1e6, 1),
+                         "parts_mb": {k: round(v / 1e6, 1) for k, v in need.parts.items()},
+                         "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": batch_size}
         if name in noise:
             result.noise = noise[name].relative(texels.lightmaps, result.value * np.pi)
         elif name == "photon_map":  # DESIGN.md §2: about 1/√(k − 1) whatever the photon count
@@ -347,6 +351,33 @@ def _finish(settings, bounces, texels, est, tracer, seconds, direct_e=None, dire
     return BakeResult(settings, bounces, result_images, masks, centre_masks, texels, value, tracer.stats,
                       est.counters, seconds, direct=dict(direct_info or {}), raw_images=raw_images,
                       warnings=warnings)
+
+
+def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) -> memory.Estimate:
+    """The bake's peak memory, estimated before any work; over the budget (the setting, else 80 %
+    of what the system has free) it is a BakeError that says what to lower."""
+    pixels = sum(o.resolution * o.resolution for o in scene.objects if o.bake)
+    from .estimators import REGISTRY, _load_all
+    _load_all()
+    per_texel = {n: REGISTRY[n].bytes_per_texel for n in names}
+    hits = int(settings.photons * per_photon_kept) if "photon_map" in names else 0
+    geometry = scene.positions.nbytes + scene.normals.nbytes + scene.uvs.nbytes + 24 * scene.triangle_count
+    need = memory.estimate(pixels, per_texel, batch, per_photon, per_photon_kept,
+                           settings.threads or os.cpu_count() or 1, hits, geometry)
+    budget = settings.memory_budget_mb * 1e6 if settings.memory_budget_mb else 0.8 * memory.available_bytes()
+    if budget and need.total > budget:
+        advice = []
+        if hits and need.parts.get("photon map hits", 0) > 0.3 * need.total:
+            advice.append("a DETP estimator (they stream photons) or fewer photons")
+        if need.parts["texels"] + need.parts["lightmap images"] > 0.3 * need.total:
+            advice.append("a lower resolution")
+        if need.parts["photon batches"] + need.parts["stream logs"] > 0.3 * need.total:
+            advice.append("fewer bounces or a smaller batch")
+        raise BakeError(f"this bake would need about {need.total / 1e9:,.1f} GB of memory (the most: "
+                        f"{need.biggest()}), over the budget of {budget / 1e9:,.1f} GB"
+                        f"{' (the memory budget preference)' if settings.memory_budget_mb else ' (80 % of free memory)'}"
+                        f": use {' or '.join(advice) or 'a smaller bake'}")
+    return need
 
 
 def output_paths(result: BakeResult, out_dir: Path) -> dict:

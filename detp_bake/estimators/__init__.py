@@ -48,6 +48,7 @@ class Estimator:
     # Segments an estimator gathers before it works through them: the bake reads its sums (for the
     # noise estimate) no more often than that, so the reading costs no extra work.
     group_segments = 0
+    bytes_per_texel = 160  # memory an estimator keeps per texel (discs, index, sums): for the estimate
 
     def __init__(self, texels: TexelSet, settings: EstimatorSettings,
                  progress: Optional[Callable[[float], None]] = None, context: Optional[Context] = None):

@@ -1,0 +1,101 @@
+"""How much memory a bake will need, said before any long work, and what it really used.
+
+The peak is the sum of what lives at once: the texels (their records, the lightmap images before
+and after denoising, the direct light, the disc clearance), the estimator's per-texel state, a
+few photon batches (the one being filled, the one being estimated, a spare: photons.py), each
+thread's stream log, and for the photon map every stored hit. Batches are bounded in segments, not
+photons (`batch_photons`): in a closed white room with a thousand bounces a photon makes a
+thousand segments, and a batch of 100,000 photons would need gigabytes.
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+try:
+    import resource
+except ImportError:  # Windows
+    resource = None
+from dataclasses import dataclass
+
+SEGMENT_BYTES = 40  # origin, direction, length, flux (float32)
+HIT_BYTES = 52  # position, direction, flux, normal (float32), triangle
+STREAM_RAY_BYTES = 73  # a stream's log row: ray, flux, random state, Embree's answer, flags
+BATCH_SETS = 3  # record sets alive at once (photons._ArrayPool.KEEP)
+TEXEL_BYTES = 69 + 4 * 24 + 8  # TexelSet row, four (N, 3) float64 arrays in flight, clearance
+PIXEL_BYTES = 3 * 12 + 2  # raw, denoised and dilated float32 RGB, two masks
+MAX_BATCH_SEGMENTS = 4_000_000  # segments one batch may hold (160 MB of records per set)
+MIN_BATCH = 1000
+
+
+def segments_per_photon(survival: float, bounces: int, first: int = 0) -> float:
+    """Expected segments of one photon: its flights from bounce `first` to `bounces`, each
+    surviving Russian roulette with probability `survival` (the mean max(albedo))."""
+    q = min(max(survival, 0.0), 1.0)
+    if q >= 1.0:
+        return float(bounces + 1 - first)
+    return sum(q ** b for b in range(first, min(bounces, 100_000) + 1))
+
+
+def batch_photons(asked: int, per_photon: float) -> int:
+    """Photons per batch: as asked, but no more than MAX_BATCH_SEGMENTS segments' worth."""
+    return int(max(MIN_BATCH, min(asked, MAX_BATCH_SEGMENTS / max(per_photon, 1e-9))))
+
+
+@dataclass
+class Estimate:
+    texels: int
+    parts: dict  # what -> bytes
+
+    @property
+    def total(self) -> int:
+        return int(sum(self.parts.values()))
+
+    def biggest(self) -> str:
+        what, size = max(self.parts.items(), key=lambda kv: kv[1])
+        return f"{what} {size / 1e6:,.0f} MB"
+
+
+def estimate(pixels: int, estimator_bytes: dict, batch: int, per_photon_all: float, per_photon_kept: float,
+             threads: int, stored_hits: int = 0, geometry_bytes: int = 0) -> Estimate:
+    """pixels: the lightmaps' pixels (an upper bound on texels); estimator_bytes: {name: bytes per
+    texel}; batch: photons per batch; per_photon_all / per_photon_kept: segments a photon makes /
+    hands to the estimator; stored_hits: hits the photon map keeps."""
+    from .photons import PhotonTracer
+    parts = {
+        "texels": pixels * TEXEL_BYTES,
+        "lightmap images": pixels * PIXEL_BYTES,
+        "photon batches": int(BATCH_SETS * batch * per_photon_kept * (SEGMENT_BYTES + HIT_BYTES)),
+        # A thread's stream logs every flight of its photons (growing by half when full).
+        "stream logs": int(threads * min(PhotonTracer.MAX_STREAM, batch) * max(per_photon_all, 1.0) * 1.5
+                           * STREAM_RAY_BYTES),
+        "geometry": geometry_bytes,
+    }
+    for name, per_texel in estimator_bytes.items():
+        parts[f"estimator {name}"] = int(pixels * per_texel)
+    if stored_hits:
+        parts["photon map hits"] = stored_hits * HIT_BYTES
+    return Estimate(pixels, parts)
+
+
+def available_bytes() -> int:
+    """Memory the system could give now (MemAvailable), or 0 when it cannot say."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 0
+
+
+def peak_bytes() -> int:
+    """This process's peak resident memory so far (0 where the system cannot say)."""
+    if resource is None:
+        return 0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return int(peak if sys.platform == "darwin" else peak * 1024)
