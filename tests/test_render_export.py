@@ -465,3 +465,25 @@ def test_export_leaves_the_file_as_it_was(empty_blend, bpy):
     assert sc.object_named("Box").triangle_count == 6 * 16 * 2 * 2  # render level 2, an array of 2
     assert snapshot() == before
     assert not hasattr(bpy.types, "DETP_BAKE_RENDER_EVALUATION")
+
+
+def test_export_keeps_the_last_render(empty_blend, bpy, tmp_path):
+    """The render evaluation renders a copy of the scene: the user's Render Result is untouched."""
+    from blender_helpers import export
+    _floor(bpy)
+    _light(bpy, "Sun", "SUN")
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.location = (0, 0, 5)
+    empty_blend.collection.objects.link(cam)
+    empty_blend.camera = cam
+    r = empty_blend.render
+    r.engine, r.resolution_x, r.resolution_y = "CYCLES", 16, 16
+    empty_blend.cycles.samples, empty_blend.cycles.device = 1, "CPU"
+    bpy.ops.render.render()
+    result = bpy.data.images["Render Result"]
+    result.save_render(str(tmp_path / "before.exr"))
+    export(bpy, objects=["Floor"])
+    result.save_render(str(tmp_path / "after.exr"))
+    pixels = [np.array(bpy.data.images.load(str(tmp_path / f"{n}.exr")).pixels[:]) for n in ("before", "after")]
+    assert pixels[0].mean() > 0 and np.array_equal(*pixels)
+    assert [i.name for i in bpy.data.images if i.type == "RENDER_RESULT"] == ["Render Result"]
