@@ -106,3 +106,39 @@ def test_same_estimate_on_any_thread_count_and_when_binning_overflows(monkeypatc
     assert small.counters["clusters"] > 10 and est.bin_slots > 1
     assert small.counters["crossings"] == one.counters["crossings"]
     assert np.array_equal(small.irradiance, one.irradiance)  # the clusters do not change the sums
+
+
+def test_tangent_clearance_casts_rays_only_where_they_can_hit_and_gets_the_same_answer():
+    """The compiled pre-test skips texels whose lifted disc meets no triangle: the result equals
+    casting all eight rays from every texel (a plate with a ball resting on it and a wall)."""
+    from detp_bake import texels as texels_mod
+    from detp_bake.photons import RayCaster
+    from detp_bake.scene import PointLight
+    from synthetic import grid, make_scene, uv_sphere
+
+    ball = uv_sphere(0.4, 8, 16)
+    ball = (ball[0] + [0.3, 0.0, 0.4], ball[1], ball[2])
+    wall = grid(2.0, 1.0, 2)
+    wall = (wall[0][..., [2, 0, 1]] + [0.9, 0.0, 0.5], wall[1][..., [2, 0, 1]], wall[2])
+    sc = make_scene([("Plate", grid(2.0, 2.0, 3), 0.7, True), ("Ball", ball, 0.8, True), ("Wall", wall, 0.5, True)],
+                    [PointLight("Lamp", np.array([0.0, 0.0, 1.5]), np.full(3, 10.0))], resolution=32)
+    texels = texels_mod.rasterise(sc)
+    reach = np.full(len(texels), 0.15)
+    lift = 0.02 * np.ones(len(texels))
+    got = texels_mod.tangent_clearance(texels, sc.positions, reach, lift)
+    # Every ray from every texel, as the pass did before the pre-test.
+    n = texels.normal
+    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t = np.cross(n, helper)
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    s = np.cross(n, t)
+    origin = np.ascontiguousarray(texels.position + n * lift[:, None], np.float32)
+    caster = RayCaster(sc.positions)
+    ref = reach.copy()
+    for k in range(8):
+        a = 2.0 * np.pi * k / 8
+        far = reach.astype(np.float32)
+        dist, prim, _ = caster.intersect(origin, np.ascontiguousarray(np.cos(a) * t + np.sin(a) * s, np.float32), far)
+        ref[prim >= 0] = np.minimum(ref[prim >= 0], dist[prim >= 0])
+    assert np.array_equal(got, ref)
+    assert 0.05 < np.mean(ref < reach) < 0.8  # some texels are cut, most are not

@@ -272,3 +272,89 @@ def build(centre: np.ndarray, normal: np.ndarray, radius: np.ndarray, slab: np.n
     tree = DiscTree(order, node, left, first, count, _clusters(left, count, int(cluster)))
     t2 = time.perf_counter()
     return tree, disc, {"sort": t1 - t0, "tree": t2 - t1}
+
+
+@numba.njit(cache=True, parallel=True)
+def _box_leaves(lo, hi, order, left, first, count, node):
+    for k in numba.prange(left.shape[0]):
+        if left[k] >= 0:
+            continue
+        for c in range(3):
+            a, b = np.inf, -np.inf
+            for p in range(first[k], first[k] + count[k]):
+                a, b = min(a, lo[order[p], c]), max(b, hi[order[p], c])
+            node[k, LO + c], node[k, HI + c] = _down(a), _up(b)
+
+
+@numba.njit(cache=True)
+def _box_inner(left, node):
+    for k in range(left.shape[0] - 1, -1, -1):
+        l = left[k]
+        if l >= 0:
+            for c in range(3):
+                node[k, LO + c] = min(node[l, LO + c], node[l + 1, LO + c])
+                node[k, HI + c] = max(node[l, HI + c], node[l + 1, HI + c])
+
+
+@numba.njit(cache=True, parallel=True)
+def _discs_meet(tri, tri_lo, tri_hi, order, node, left, first, count, origin, normal, reach, out):
+    """out[i]: some triangle's box overlaps disc i's box and the triangle reaches its plane (both
+    padded by 1e-4 of the disc's size and place, far more than float32 rays stray)."""
+    for i in numba.prange(origin.shape[0]):
+        pad = 1e-4 * (reach[i] + max(abs(origin[i, 0]), max(abs(origin[i, 1]), abs(origin[i, 2]))))
+        lo = np.empty(3)
+        hi = np.empty(3)
+        for c in range(3):
+            half = reach[i] * np.sqrt(max(1.0 - normal[i, c] ** 2, 0.0)) + pad
+            lo[c], hi[c] = origin[i, c] - half, origin[i, c] + half
+        stack = np.empty(STACK_DEPTH, np.int32)
+        stack[0] = 0
+        sp = 1
+        while sp > 0 and not out[i]:
+            sp -= 1
+            k = stack[sp]
+            if (lo[0] > node[k, HI] or hi[0] < node[k, LO] or lo[1] > node[k, HI + 1] or hi[1] < node[k, LO + 1]
+                    or lo[2] > node[k, HI + 2] or hi[2] < node[k, LO + 2]):
+                continue
+            if left[k] >= 0:
+                stack[sp], stack[sp + 1] = left[k], left[k] + 1
+                sp += 2
+                continue
+            for p in range(first[k], first[k] + count[k]):
+                t = order[p]
+                if (lo[0] > tri_hi[t, 0] or hi[0] < tri_lo[t, 0] or lo[1] > tri_hi[t, 1] or hi[1] < tri_lo[t, 1]
+                        or lo[2] > tri_hi[t, 2] or hi[2] < tri_lo[t, 2]):
+                    continue
+                below = above = False
+                for v in range(3):
+                    d = 0.0
+                    for c in range(3):
+                        d += (tri[t, v, c] - origin[i, c]) * normal[i, c]
+                    below |= d <= pad
+                    above |= d >= -pad
+                if below and above:
+                    out[i] = True
+                    break
+
+
+STACK_DEPTH = 256
+
+
+def discs_meet_triangles(positions: np.ndarray, origin: np.ndarray, normal: np.ndarray,
+                         reach: np.ndarray) -> np.ndarray:
+    """Per disc (origin, unit normal, radius `reach`): whether some triangle (T, 3, 3) may cross it.
+    Conservative: False only where no ray within the disc can hit a triangle."""
+    tri = np.ascontiguousarray(positions, np.float64)
+    out = np.zeros(len(origin), np.bool_)
+    if len(tri) == 0 or len(origin) == 0:
+        return out
+    lo, hi = tri.min(axis=1), tri.max(axis=1)
+    codes = morton_codes(0.5 * (lo + hi))
+    order = np.argsort(codes)
+    left, first, count = _topology(codes[order], LEAF_SIZE)
+    node = np.zeros((len(left), 10), np.float32)
+    _box_leaves(lo, hi, order, left, first, count, node)
+    _box_inner(left, node)
+    _discs_meet(tri, lo, hi, order, node, left, first, count, np.ascontiguousarray(origin, np.float64),
+                np.ascontiguousarray(normal, np.float64), np.ascontiguousarray(reach, np.float64), out)
+    return out

@@ -27,6 +27,7 @@ from .bvh import AXIS, CONE, HI, LO, build
 from .discs import crossing_weight, make_discs
 from .morton import segment_order
 
+LEAF = 4  # discs per leaf
 CLUSTER = 1 << 14  # discs per unit of parallel work: fewer means more binning, more means worse balance
 BIN_CHUNK = 1 << 12  # segments per binning task
 STACK = 256  # deeper than any tree over 63-bit codes
@@ -176,7 +177,7 @@ class DiscIndex(Estimator):
         t0 = time.perf_counter()
         d = make_discs(texels, settings, self.context.scene_radius, self.context.clearance)
         self.eps, self.kernel = d.eps, d.kernel
-        self.tree, self.disc, steps = build(d.centre, d.normal, d.radius, d.slab, d.eps,
+        self.tree, self.disc, steps = build(d.centre, d.normal, d.radius, d.slab, d.eps, LEAF,
                                             cluster=max(CLUSTER, len(d) // 4096))
         self.cluster_of = np.full(self.tree.nodes, -1, np.int32)
         self.cluster_of[self.tree.clusters] = np.arange(len(self.tree.clusters), dtype=np.int32)
