@@ -1,6 +1,6 @@
 """Plain scene data: what the photon tracer and the texel rasteriser need, and nothing of Blender.
 
-The Blender adapter (`blender_scene.py`) fills these dataclasses; tests build them by hand. All
+The Blender adapter (the `blender_scene` package) fills these dataclasses; tests build them by hand. All
 geometry is in world space, metres; colours are linear RGB; powers are watts as Cycles reads them
 (see DESIGN.md §3 and `lights.py` for the exact conventions).
 """

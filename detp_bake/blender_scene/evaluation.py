@@ -15,8 +15,9 @@ from typing import Callable, Optional
 import bpy
 import numpy as np
 
-from .errors import BakeError
-from .scene import MAX_POWER, MAX_SIZE, AreaLight, BakeObject, PointLight, SpotLight, SunLight
+from ..errors import BakeError
+from .materials import SlotRows, TextureTable, corner_colours, corner_uvs, render_uv_name
+from ..scene import MAX_POWER, MAX_SIZE, AreaLight, BakeObject, PointLight, SpotLight, SunLight
 
 GEOMETRY_TYPES = ("MESH", "CURVE", "SURFACE", "FONT", "META")
 NOT_EXPORTED = {"CURVES": "hair curves", "POINTCLOUD": "point clouds", "VOLUME": "volumes"}
@@ -123,6 +124,15 @@ class _Geometry:
     uvs: Optional[np.ndarray]  # (T, 3, 2) lightmap UVs (bake targets only)
     material: np.ndarray  # (T,) material index
     materials: list  # the evaluated data's own materials, for objects without slots
+    uv_sets: dict  # UV map name -> (T, 3, 2) float32, for textures
+    render_uv: Optional[str]  # the map Cycles reads when a texture names none
+    colours: dict  # colour attribute name -> (T, 3, 3) float32 linear RGB ("" = the render one)
+
+    def uv(self, name: Optional[str]) -> Optional[np.ndarray]:
+        return self.uv_sets.get(name or self.render_uv)
+
+    def colour(self, name: str) -> Optional[np.ndarray]:
+        return self.colours.get(name) if name else self.colours.get("")
 
 
 def _extract(ob, uv_name: Optional[str]) -> _Geometry:
@@ -150,10 +160,18 @@ def _extract(ob, uv_name: Optional[str]) -> _Geometry:
                 uv = flat.reshape(-1, 2)
             uvs = uv[tri_l.reshape(-1, 3)]
         materials = list(me.materials)
+        loops = tri_l.reshape(-1, 3)
+        uv_sets = {layer.name: corner_uvs(me, loops, layer.name).astype(np.float32) for layer in me.uv_layers}
+        render_uv = render_uv_name(me)
+        colours = {}
+        for attr in me.color_attributes:
+            colours[attr.name] = corner_colours(me, loops, attr.name).astype(np.float32)
+        if len(me.color_attributes):
+            colours[""] = corner_colours(me, loops, "").astype(np.float32)
     finally:
         ob.to_mesh_clear()
     return _Geometry(co.reshape(-1, 3), tri_v.reshape(-1, 3), corner_n.reshape(-1, 3)[tri_l.reshape(-1, 3)],
-                     uvs, mat_index, materials)
+                     uvs, mat_index, materials, uv_sets, render_uv, colours)
 
 
 def _place(g: _Geometry, m: np.ndarray):
@@ -256,23 +274,31 @@ class Collector:
     def __init__(self, layers: dict, log: Callable[[str], None], material_rows: Callable):
         self.layers = layers  # bake target name -> lightmap UV layer
         self.log = log
-        self.material_rows = material_rows  # material or None -> (albedo RGB, emission RGB)
+        self.material_rows = material_rows  # material or None -> materials.Surface
         self.geometry: dict = {}
-        self.records: list = []  # (owner, key, matrix, albedo rows, emission rows, bake, emissive only, source)
+        self.records: list = []  # (owner, key, matrix, slot rows, bake, emissive only, source)
         self.lights: list = []
         self.found: set = set()
         self.left_out: dict = {}
         self.instanced_lights = 0
         self._rows: dict = {}
+        self._surfaces: dict = {}
 
-    def _material_rows(self, mats):
-        """(albedo, emission) rows per slot; the same pair of arrays for the same materials."""
+    def _material_rows(self, mats) -> SlotRows:
+        """The materials of an object's slots as rows; the same rows for the same materials, each
+        material read (and its approximations said) once."""
         mats = [m.original if m is not None else None for m in mats or [None]]
         keys = tuple(m.as_pointer() if m is not None else 0 for m in mats)
         if keys not in self._rows:
-            rows = [self.material_rows(m) for m in mats]
-            self._rows[keys] = (np.array([r[0] for r in rows], float).reshape(-1, 3),
-                                np.array([r[1] for r in rows], float).reshape(-1, 3))
+            surfaces = []
+            for m in mats:
+                key = m.as_pointer() if m is not None else 0
+                if key not in self._surfaces:
+                    self._surfaces[key] = self.material_rows(m)
+                    for note in self._surfaces[key].notes:
+                        self.log(f"material '{m.name}': {note}")
+                surfaces.append(self._surfaces[key])
+            self._rows[keys] = SlotRows.of(surfaces)
         return self._rows[keys]
 
     def _skip(self, reason: str, name: str) -> None:
@@ -320,15 +346,16 @@ class Collector:
             n = max(len(slots), len(g.materials))
             mats = [(slots[i] if i < len(slots) else None) or (g.materials[i] if i < len(g.materials) else None)
                     for i in range(n)]
-            albedo, emission = self._material_rows(mats)
-            self.records.append((owner, key, np.array(inst.matrix_world, float), albedo, emission, bake,
-                                 emissive_only, (source, parent.original.name if parent is not None else None)))
+            rows = self._material_rows(mats)
+            self.records.append((owner, key, np.array(inst.matrix_world, float), rows, bake, emissive_only,
+                                 (source, parent.original.name if parent is not None else None)))
         return self
 
 
 def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = True):
     """World-space arrays, one BakeObject per owner (an object, or all instances of one instancer),
-    and the export statistics. Raises BakeError past `max_bytes` before building anything big, and
+    the export statistics, and the scene's textures and per-triangle texture and opacity arrays
+    (materials.TextureTable.finish). Raises BakeError past `max_bytes` before building anything big, and
     for a bake target without faces (`strict`; otherwise it is just not baked)."""
     counts: dict = {}
     for owner, key, *_, source in c.records:
@@ -345,21 +372,22 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = T
                         f"GB, more than the budget of {max_bytes / 1e9:.2f} GB; the biggest: {said}")
     groups: dict = {}
     for rec in c.records:
-        groups.setdefault((rec[0], rec[5]), []).append(rec)
-    pos, nrm, uvs, alb, emi, objs = [], [], [], [], [], []
+        groups.setdefault((rec[0], rec[4]), []).append(rec)
+    pos, nrm, uvs, alb, emi, objs, surf = [], [], [], [], [], [], []
+    table = TextureTable()
     first, names = 0, set()
     instances = instanced_tris = 0
     for (owner, bake), recs in groups.items():
         start = first
         batches: dict = {}  # placements that share geometry and materials are placed together
-        for _, key, m, albedo, emission, _, emissive_only, (_, parent) in recs:
-            batches.setdefault((key, id(albedo), emissive_only, parent is not None),
-                               (albedo, emission, []))[2].append(m)
-        for (key, _, emissive_only, instanced), (albedo, emission, ms) in batches.items():
+        for _, key, m, rows, _, emissive_only, (_, parent) in recs:
+            batches.setdefault((key, id(rows), emissive_only, parent is not None), (rows, []))[1].append(m)
+        for (key, _, emissive_only, instanced), (rows, ms) in batches.items():
             g, n_inst = c.geometry[key], len(ms)
             p, n, keep = _place(g, np.array(ms))
-            mi = np.tile(np.clip(g.material, 0, len(albedo) - 1), n_inst)
-            a, e = albedo[mi], emission[mi]
+            mi = np.tile(np.clip(g.material, 0, len(rows.albedo) - 1), n_inst)
+            a, e = rows.albedo[mi], rows.emission[mi]
+            surface = table.triangles(rows, g, mi, n_inst, a, c.log)
             if emissive_only:
                 keep &= np.any(e != 0.0, axis=1)
             pos.append(p[keep])
@@ -368,6 +396,7 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = T
                        else np.zeros((int(keep.sum()), 3, 2)))
             alb.append(a[keep])
             emi.append(e[keep])
+            surf.append({k: v[keep] for k, v in surface.items()})
             first += int(keep.sum())
             if instanced:
                 instances += n_inst
@@ -390,7 +419,7 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = T
     stats = {
         "evaluation": "render",
         "triangles": first,
-        "objects": sum(1 for r in c.records if r[7][1] is None),
+        "objects": sum(1 for r in c.records if r[6][1] is None),
         "instances": instances,
         "instanced_triangles": instanced_tris,
         "shared_geometries": len(c.geometry),
@@ -401,4 +430,6 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = T
         "largest": top,
         "left_out": c.left_out,
     }
-    return arrays, objs, stats
+    surfaces = table.finish(surf)
+    stats["textures"] = len(table.images)
+    return arrays, objs, stats, surfaces

@@ -1,0 +1,17 @@
+"""The Blender adapter, the only part of detp_bake that imports `bpy`: Blender data → `scene.Scene`
+(export), baked images back into materials (lightmaps), lightmap UV layers (uv), and Cycles' own
+bake as the reference (reference).
+
+Export reads the scene as F12 renders it (evaluation). Applying a lightmap adds a node frame named
+FRAME_NAME to each material and remembers on the object what it changed, so `revert` restores the
+materials, slots and images exactly as they were.
+"""
+from .common import DEFAULT_ALBEDO, DEFAULT_UV, FRAME_NAME, REVERT_KEY
+from .export import export_scene, material_albedo_emission, scene_bounces
+from .lightmaps import apply_all, apply_lightmap, load_image, revert
+from .reference import cycles_bake
+from .uv import ensure_lightmap_uv, remove_uv_layers, unwrap_into
+
+__all__ = ["DEFAULT_ALBEDO", "DEFAULT_UV", "FRAME_NAME", "REVERT_KEY", "export_scene", "material_albedo_emission",
+           "scene_bounces", "apply_all", "apply_lightmap", "load_image", "revert", "cycles_bake",
+           "ensure_lightmap_uv", "remove_uv_layers", "unwrap_into"]

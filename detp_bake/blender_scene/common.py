@@ -1,0 +1,45 @@
+"""Node-tree helpers every part of the adapter uses."""
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+FRAME_NAME = "detp_bake lightmap"
+REVERT_KEY = "detp_bake_revert"
+DEFAULT_UV = "Lightmap"
+DEFAULT_ALBEDO = (0.8, 0.8, 0.8)
+
+
+def _has_nodes(idblock) -> bool:
+    """Node-based shading in use (`use_nodes` is deprecated in Blender 5, where it always is)."""
+    if idblock.node_tree is None:
+        return False
+    return bpy.app.version >= (5, 0, 0) or bool(idblock.use_nodes)
+
+
+def _socket(node, *names):
+    for name in names:
+        sock = node.inputs.get(name)
+        if sock is not None:
+            return sock
+    return None
+
+
+def _rgb(sock) -> np.ndarray:
+    v = sock.default_value
+    return np.array([v[0], v[1], v[2]], float) if hasattr(v, "__len__") else np.full(3, float(v))
+
+
+def _value(sock, default=0.0) -> float:
+    return float(sock.default_value) if sock is not None else default
+
+
+def _surface_shader(mat):
+    nt = mat.node_tree
+    outputs = [n for n in nt.nodes if n.type == "OUTPUT_MATERIAL"]
+    outputs.sort(key=lambda n: (not n.is_active_output, n.target not in ("ALL", "CYCLES")))
+    for out in outputs:
+        surf = out.inputs.get("Surface")
+        if surf is not None and surf.is_linked:
+            return surf.links[0].from_node
+    return None

@@ -1,0 +1,110 @@
+"""Blender data → `scene.Scene`: the scene as F12 renders it (evaluation.py), its materials
+(materials.py), lights and world (world.py), with lightmap UVs for the objects to bake."""
+from __future__ import annotations
+
+from typing import Callable, Iterable, Optional
+
+import bpy
+import numpy as np
+
+from ..errors import BakeError
+from ..scene import Scene
+from .common import DEFAULT_UV, _has_nodes
+from .evaluation import Collector, flatten, holdout, instancers, render_evaluation, rendered_names
+from .materials import Surface, read_surface
+from .world import export_world
+from .uv import ensure_lightmap_uv
+
+
+def material_surface(mat) -> Surface:
+    """The lightmap view of a material (materials.read_surface)."""
+    return read_surface(mat, _has_nodes(mat) if mat is not None else False)
+
+
+def material_albedo_emission(mat) -> tuple[np.ndarray, np.ndarray]:
+    """A material's constant diffuse albedo and emitted radiance (textures not applied)."""
+    s = material_surface(mat)
+    return s.albedo, s.emission
+
+
+def scene_bounces(bl_scene) -> int:
+    """Cycles' Light Paths › Diffuse bounces, capped by Total bounces."""
+    cycles = getattr(bl_scene, "cycles", None)
+    if cycles is None:
+        return 4
+    return int(min(cycles.diffuse_bounces, cycles.max_bounces))
+
+
+def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = None,
+                 uv_layer=None, resolution=0, log: Callable[[str], None] = print,
+                 created: Optional[list] = None, max_bytes: Optional[int] = None) -> Scene:
+    """The scene as F12 renders it (`render_evaluation`): every rendered mesh, curve, surface, text
+    and metaball, and every instance of one, is geometry in world space; `objects` (default: every
+    rendered mesh object) get lightmaps, and must be real mesh objects. `depsgraph` only names the
+    view layer (default: the context's); a render depsgraph is used as it is.
+
+    `uv_layer` names the lightmap UV layer: one name for all, or {object name: layer} for some; a
+    named layer must exist. Objects with no name given use DEFAULT_UV, created by Lightmap Pack
+    where missing (said through `log`, and listed in `created` as (object, layer) so a cancelled
+    bake can remove it again). `resolution` is one size for all or {object name: size}.
+    `max_bytes` limits the flattened geometry (BakeError naming the biggest contributors)."""
+    view_layer = depsgraph.view_layer if depsgraph is not None else bpy.context.view_layer
+    rendered = rendered_names(view_layer)
+    if objects is None:
+        targets = [o for o in bl_scene.objects if o.type == "MESH" and o.name in rendered
+                   and not holdout(o, view_layer)]
+    else:
+        targets = []
+        for name in objects:
+            obj = bl_scene.objects.get(name)
+            if obj is None or obj.name not in rendered:
+                owners = render_evaluation(bl_scene, view_layer, instancers(name))
+                if owners:
+                    raise BakeError(f"object '{name}' is only an instance (in {', '.join(sorted(owners)[:3])}): "
+                                    "lightmaps are baked on real mesh objects; make it real (Object › Apply › "
+                                    "Make Instances Real) to bake one for it")
+                if obj is None:
+                    raise BakeError(f"object '{name}' is not in scene '{bl_scene.name}'")
+                raise BakeError(f"object '{name}' is not rendered (Disable in Renders, or its collection is "
+                                f"excluded from view layer '{view_layer.name}' or disabled in renders)")
+            if obj.type != "MESH":
+                raise BakeError(f"object '{name}' is a {obj.type.lower()}, not a mesh: convert it to a mesh "
+                                "to bake a lightmap for it")
+            if holdout(obj, view_layer):
+                raise BakeError(f"object '{name}' is a holdout, which Cycles bakes black: turn Holdout off "
+                                "to bake it")
+            targets.append(obj)
+    if not targets:
+        raise BakeError(f"scene '{bl_scene.name}' has no rendered mesh object to bake")
+    named = uv_layer if isinstance(uv_layer, dict) else {o.name: uv_layer for o in targets if uv_layer}
+    for obj in targets:
+        layer = named.get(obj.name)
+        if layer is not None and layer not in obj.data.uv_layers:
+            raise BakeError(f"object '{obj.name}' has no UV layer '{layer}'")
+    layers = {o.name: named.get(o.name) or DEFAULT_UV for o in targets}
+    for obj in targets:
+        if ensure_lightmap_uv(obj, layers[obj.name]):
+            log(f"object '{obj.name}': created UV layer '{layers[obj.name]}' with Lightmap Pack")
+            if created is not None:
+                created.append((obj.name, layers[obj.name]))
+
+    collector = Collector(layers, log, material_surface)
+    if depsgraph is not None and depsgraph.mode == "RENDER":
+        collector(depsgraph)
+    else:
+        render_evaluation(bl_scene, view_layer, collector)
+    for name in layers:
+        if name not in collector.found:
+            if objects is not None:
+                raise BakeError(f"object '{name}' is not in the render (F12 does not show it), so it cannot be baked")
+            log(f"object '{name}' is not in the render (F12 does not show its own faces): not baked")
+    for reason, names in collector.left_out.items():
+        log(f"left out ({reason}): {', '.join(names[:5])}" + (f" and {len(names) - 5} more" if len(names) > 5 else ""))
+    (pos, nrm, uvs, alb, emi), objs, stats, surfaces = flatten(collector, resolution, max_bytes,
+                                                                strict=objects is not None)
+    world, world_map = export_world(bl_scene.world, log)
+    scene = Scene(positions=pos, normals=nrm, uvs=uvs, albedo=alb, emission=emi, objects=objs,
+                  lights=collector.lights, world=world, default_bounces=scene_bounces(bl_scene),
+                  world_map=world_map, **surfaces)
+    scene.export_stats = stats
+    return scene

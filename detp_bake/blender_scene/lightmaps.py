@@ -1,0 +1,193 @@
+"""Baked images back into Blender: load them, wire them into the objects' materials under a node
+frame, and undo exactly that (`revert`), recorded on the object."""
+from __future__ import annotations
+
+import json
+from typing import Optional
+
+import bpy
+
+from ..errors import BakeError
+from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY, _has_nodes
+
+
+def load_image(path: str, name: str):
+    """Load (or reload) a baked EXR as a linear image datablock named `name`."""
+    img = bpy.data.images.get(name)
+    if img is not None and bpy.path.abspath(img.filepath) == path:
+        img.reload()
+        return img
+    img = bpy.data.images.load(path, check_existing=False)
+    img.name = name
+    img.colorspace_settings.is_data = False
+    return img
+
+
+def _base_colour_source(nt):
+    """The socket or constant feeding the surface's base colour."""
+    for node in nt.nodes:
+        if node.type in ("BSDF_PRINCIPLED", "BSDF_DIFFUSE"):
+            sock = node.inputs["Base Color" if node.type == "BSDF_PRINCIPLED" else "Color"]
+            if sock.is_linked:
+                return sock.links[0].from_socket, None
+            return None, tuple(sock.default_value)
+    return None, (0.8, 0.8, 0.8, 1.0)
+
+
+def _wire(mat, image, uv_name: str) -> None:
+    """Add the lightmap frame: UV Map → Image × base colour → Emission → an EEVEE output made
+    active, so the viewport shows the baked lighting while Cycles keeps the original shading."""
+    nt = mat.node_tree
+    previous = [n.name for n in nt.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output]
+    src, const = _base_colour_source(nt)
+    frame = nt.nodes.new("NodeFrame")
+    frame.name = frame.label = FRAME_NAME
+    x0 = max((n.location.x for n in nt.nodes if n is not frame), default=0.0) + 300.0
+    uv = nt.nodes.new("ShaderNodeUVMap")
+    uv.uv_map = uv_name
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.interpolation = "Linear"
+    mix = nt.nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    mix.blend_type = "MULTIPLY"
+    mix.inputs["Factor"].default_value = 1.0
+    emit = nt.nodes.new("ShaderNodeEmission")
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    out.target = "EEVEE"
+    for i, node in enumerate((uv, tex, mix, emit, out)):
+        node.parent = frame
+        node.location = (x0 + 250.0 * i, -400.0)
+    nt.links.new(uv.outputs["UV"], tex.inputs["Vector"])
+    a, b = mix.inputs[6], mix.inputs[7]  # the RGBA pair of ShaderNodeMix
+    if src is not None:
+        nt.links.new(src, a)
+    else:
+        a.default_value = const
+    nt.links.new(tex.outputs["Color"], b)
+    nt.links.new(mix.outputs[2], emit.inputs["Color"])
+    nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
+    out.is_active_output = True
+    mat[REVERT_KEY] = json.dumps({"active_outputs": previous})
+
+
+def _unwire(mat) -> None:
+    nt = mat.node_tree
+    frame = nt.nodes.get(FRAME_NAME)
+    if frame is not None:
+        for node in [n for n in nt.nodes if n.parent == frame]:
+            nt.nodes.remove(node)
+        nt.nodes.remove(frame)
+    state = json.loads(mat.get(REVERT_KEY, "{}"))
+    for name in state.get("active_outputs", []):
+        node = nt.nodes.get(name)
+        if node is not None:
+            node.is_active_output = True
+    if REVERT_KEY in mat:
+        del mat[REVERT_KEY]
+
+
+def _use_nodes(mat) -> None:
+    """Blender 5 gives every material a node tree and deprecates `use_nodes`."""
+    if mat.node_tree is None or bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+
+
+def apply_lightmap(obj, image, uv_name: str, shared: bool = False) -> None:
+    """Show `image` on `obj`'s materials. A material other baked objects also use is copied for
+    this object (`shared`), and so is every material of a mesh other objects share (the copy goes
+    in an object-level slot, so the other objects keep theirs); an empty slot gets a new material.
+    All of it is undone by `revert`."""
+    if REVERT_KEY in obj:
+        raise BakeError(f"object '{obj.name}' already shows a lightmap: revert it first")
+    record = {"slots": [], "added_slots": 0, "image": image.name}
+    if not obj.material_slots:
+        obj.data.materials.append(None)
+        record["added_slots"] = 1
+    shared_mesh = obj.data.users > 1
+    for index, slot in enumerate(obj.material_slots):
+        entry = {"index": index, "original": slot.material.name if slot.material else None,
+                 "copy": None, "link": slot.link}
+        original = slot.material
+        if shared_mesh and slot.link == "DATA":
+            slot.link = "OBJECT"
+            entry["object_material"] = slot.material.name if slot.material else None
+        if original is None:
+            mat = bpy.data.materials.new(f"{obj.name} lightmap")
+            _use_nodes(mat)
+            entry["copy"] = mat.name
+            slot.material = mat
+        elif shared or shared_mesh or not _has_nodes(original):
+            mat = original.copy()
+            mat.name = f"{original.name} ({obj.name} lightmap)"
+            _use_nodes(mat)
+            if mat.node_tree.nodes.get(FRAME_NAME) is not None:
+                _unwire(mat)  # copied from a material that shows another lightmap
+            entry["copy"] = mat.name
+            slot.material = mat
+        else:
+            mat = original
+        record["slots"].append(entry)
+        if mat.node_tree.nodes.get(FRAME_NAME) is None:
+            _wire(mat, image, uv_name)
+    obj[REVERT_KEY] = json.dumps(record)
+
+
+def revert(obj) -> bool:
+    """Undo `apply_lightmap` on one object exactly; False when there was nothing to undo."""
+    if REVERT_KEY not in obj:
+        return False
+    record = json.loads(obj[REVERT_KEY])
+    for entry in record["slots"]:
+        index, original, copy = entry["index"], entry["original"], entry["copy"]
+        slot = obj.material_slots[index] if index < len(obj.material_slots) else None
+        if copy is not None:
+            made = bpy.data.materials.get(copy)
+            if slot is not None:
+                if "object_material" in entry:  # we switched this slot to object level
+                    slot.material = bpy.data.materials.get(entry["object_material"] or "")
+                    slot.link = entry["link"]
+                else:
+                    slot.material = bpy.data.materials.get(original) if original else None
+            if made is not None and made.users == 0:
+                bpy.data.materials.remove(made)
+        elif original is not None:
+            mat = bpy.data.materials.get(original)
+            if mat is not None and mat.node_tree:
+                _unwire(mat)
+    for _ in range(record.get("added_slots", 0)):
+        obj.data.materials.pop()
+    del obj[REVERT_KEY]
+    img = bpy.data.images.get(record.get("image", ""))
+    if img is not None and img.users == 0:
+        bpy.data.images.remove(img)
+    return True
+
+
+def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional[dict] = None,
+              copy_materials: bool = False) -> list:
+    """Load each baked EXR and wire it into its object's materials; returns the objects.
+    `uv_layer`: one name, {object name: name}, or None for DEFAULT_UV. `objects` maps a lightmap's
+    object name to the object to apply it to (default: the scene's object of that name);
+    `copy_materials` gives each object its own material copies even when nobody shares them."""
+    targets = {}
+    for name in files:
+        obj = (objects or {}).get(name) or bl_scene.objects.get(name)
+        if obj is not None:
+            targets[name] = obj
+    users: dict = {}
+    for obj in targets.values():
+        for slot in obj.material_slots:
+            if slot.material is not None:
+                users.setdefault(slot.material.name, set()).add(obj.name)
+    for name, obj in targets.items():
+        exr = [p for p in files[name] if p.endswith(".exr")]
+        if not exr:
+            raise BakeError("applying lightmaps needs the EXR format in 'formats'")
+        layer = uv_layer.get(name) if isinstance(uv_layer, dict) else uv_layer
+        revert(obj)  # a new bake replaces the last one
+        image = load_image(exr[0], f"{obj.name}.{estimator}")
+        shared = copy_materials or any(len(users.get(s.material.name, ())) > 1
+                                       for s in obj.material_slots if s.material)
+        apply_lightmap(obj, image, layer or DEFAULT_UV, shared)
+    return list(targets.values())
