@@ -33,9 +33,12 @@ def output_directory(context) -> str:
 
 
 def bake_targets(context) -> list:
-    """Selected meshes marked Include, or every visible included mesh when none is selected."""
+    """Selected meshes marked Include, or every rendered included mesh when none is selected (what
+    F12 renders: a mesh hidden in the viewport but rendered is baked too)."""
+    rendered = blender_scene.rendered_names(context.view_layer)
+
     def ok(o):
-        return o.type == "MESH" and o.visible_get() and not o.hide_render and o.detp_bake.include
+        return o.type == "MESH" and o.name in rendered and o.detp_bake.include
     picked = [o for o in context.selected_objects if ok(o)]
     return picked or [o for o in context.scene.objects if ok(o)]
 

@@ -272,3 +272,26 @@ def test_blender_command_line_handler_bakes_and_compares(addon, cornell, bpy, tm
     assert summary["estimators"] == ["photon_map", "disc_index"] and 0 < summary["difference_to_first"]["disc_index"] < 1
     assert cli_command.execute(["bake", "--resolution", "0", "--out", str(tmp_path / "d")]) == 2
     assert "resolution" in capsys.readouterr().err
+
+
+def test_an_instance_selected_says_how_to_bake_it_and_hidden_meshes_that_render_are_baked(addon, cornell, bpy):
+    """The Active Object panel explains that an instancer only lights and shadows the bake (make it
+    real to bake it); Bake All takes a mesh hidden in the viewport but rendered, not one disabled in
+    renders."""
+    from detp_bake_addon.operators import common
+    from detp_bake_addon.ui import panels
+    coll = bpy.data.collections.new("Props")
+    empty = bpy.data.objects.new("Props instance", None)
+    empty.instance_type, empty.instance_collection = "COLLECTION", coll
+    cornell.collection.objects.link(empty)
+    bpy.context.view_layer.objects.active = empty
+    log = []
+    panels.DETPBAKE_PT_object.draw(type("P", (), {"layout": RecordingLayout(bpy, log)})(), bpy.context)
+    text = " ".join(t for kind, t in log if kind == "label")
+    assert "instancer" in text and "Make Instances Real" in text
+    cornell.objects["TallBox"].hide_set(True)  # hidden in the viewport, still rendered
+    cornell.objects["ShortBox"].hide_render = True
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    names = {o.name for o in common.bake_targets(bpy.context)}
+    assert "TallBox" in names and "ShortBox" not in names and "Floor" in names

@@ -91,12 +91,21 @@ class DETPBAKE_PT_object(_Panel, bpy.types.Panel):
 
     @classmethod
     def poll(cls, context):
-        return context.active_object is not None and context.active_object.type == "MESH"
+        return context.active_object is not None
 
     def draw(self, context):
         layout = self.layout
+        obj = context.active_object
+        if obj.type != "MESH":
+            col = layout.column(align=True)
+            kind = "instancer" if obj.instance_type != "NONE" else obj.type.lower()
+            col.label(text=f"This {kind} lights and shadows the bake,", icon="INFO")
+            col.label(text="but lightmaps are baked on mesh objects.")
+            col.label(text="To bake one for it: Object > Apply > Make Instances Real"
+                      if obj.instance_type != "NONE" else "To bake one for it: Object > Convert > Mesh")
+            return
         layout.use_property_split = True
-        o = context.active_object.detp_bake
+        o = obj.detp_bake
         layout.prop(o, "include")
         layout.prop(o, "resolution")
         layout.prop(o, "uv_layer")

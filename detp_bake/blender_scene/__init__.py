@@ -7,6 +7,7 @@ FRAME_NAME to each material and remembers on the object what it changed, so `rev
 materials, slots and images exactly as they were.
 """
 from .common import DEFAULT_ALBEDO, DEFAULT_UV, FRAME_NAME, REVERT_KEY
+from .evaluation import rendered_names
 from .export import export_scene, material_albedo_emission, scene_bounces
 from .lightmaps import apply_all, apply_lightmap, load_image, revert
 from .reference import cycles_bake
@@ -14,4 +15,4 @@ from .uv import ensure_lightmap_uv, remove_uv_layers, unwrap_into
 
 __all__ = ["DEFAULT_ALBEDO", "DEFAULT_UV", "FRAME_NAME", "REVERT_KEY", "export_scene", "material_albedo_emission",
            "scene_bounces", "apply_all", "apply_lightmap", "load_image", "revert", "cycles_bake",
-           "ensure_lightmap_uv", "remove_uv_layers", "unwrap_into"]
+           "ensure_lightmap_uv", "remove_uv_layers", "unwrap_into", "rendered_names"]
