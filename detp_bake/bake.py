@@ -129,6 +129,7 @@ class BakeResult:
     direct: dict = field(default_factory=dict)  # how direct light was found (report.json)
     noise: dict = field(default_factory=dict)  # object name -> relative noise of its lightmap
     memory: dict = field(default_factory=dict)  # the estimate made before work, and the peak used
+    export: dict = field(default_factory=dict)  # what the exporter found (instances, triangles, textures, …)
     raw_images: dict = field(default_factory=dict)  # object name -> image before denoising (when denoised)
     warnings: list = field(default_factory=list)
     stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit
@@ -158,6 +159,7 @@ class BakeResult:
             "noise": {name: round(100.0 * v, 3) for name, v in self.noise.items()},  # per cent
             "stopped_by": self.stopped_by,
             "memory": self.memory,
+            "export": self.export,
             "denoised": bool(self.raw_images),
             "warnings": list(self.warnings),
             "seconds": self.seconds,
@@ -312,6 +314,7 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
                          direct_e, direct_info)
         result.stopped_by = stopped_by
         result.share = share
+        result.export = dict(getattr(scene, "export_stats", None) or {})
         result.memory = {"estimate_mb": round(need.total / 1e6, 1),
                          "parts_mb": {k: round(v / 1e6, 1) for k, v in need.parts.items()},
                          "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": batch_size}

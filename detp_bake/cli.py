@@ -137,8 +137,10 @@ def _open_scene(args, settings, bl_scene):
             raise BakeError(f"cannot open scene file '{path}': {exc}") from None
         bl_scene = bpy.context.scene
     t0 = time.perf_counter()
+    from .memory import geometry_budget
     scene = blender_scene.export_scene(bl_scene, bpy.context.evaluated_depsgraph_get(), args.objects,
-                                       args.uv_layer, settings.resolution, _log)
+                                       args.uv_layer, settings.resolution, _log,
+                                       max_bytes=geometry_budget(settings.memory_budget_mb) or None)
     _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
          f"baking {sum(o.bake for o in scene.objects)} objects")
     return bpy, blender_scene, bl_scene, scene, out_dir, time.perf_counter() - t0

@@ -93,6 +93,13 @@ def available_bytes() -> int:
         return 0
 
 
+def geometry_budget(memory_budget_mb: int = 0) -> int:
+    """Bytes the flattened scene geometry may take: half the bake's budget (the setting, else
+    80 % of free memory), so the texels and photons keep the rest; 0 when unknown."""
+    budget = memory_budget_mb * 1e6 if memory_budget_mb else 0.8 * available_bytes()
+    return int(0.5 * budget)
+
+
 def peak_bytes() -> int:
     """This process's peak resident memory so far (0 where the system cannot say)."""
     if resource is None:

@@ -2,7 +2,7 @@
 and a Blender scene exported for the core."""
 import bpy
 
-from ..detp_bake import blender_scene, texels
+from ..detp_bake import blender_scene, memory, texels
 from ..detp_bake.bake import BakeSettings
 from ..detp_bake.estimators import EstimatorSettings
 
@@ -52,8 +52,10 @@ def export(context, objects, log, created=None):
     """The scene for the core, with each object's lightmap size (override, density or fixed)."""
     s = context.scene.detp_bake
     sizes = {o.name: o.detp_bake.resolution or s.resolution for o in objects}
+    prefs = preferences(context)
+    budget = memory.geometry_budget(prefs.memory_budget if prefs is not None else 0)
     scene = blender_scene.export_scene(context.scene, context.evaluated_depsgraph_get(), [o.name for o in objects],
-                                       uv_layers(objects), sizes, log, created)
+                                       uv_layers(objects), sizes, log, created, max_bytes=budget or None)
     if s.resolution_mode == "DENSITY":
         for obj in scene.objects:
             if obj.bake and not context.scene.objects[obj.name].detp_bake.resolution:

@@ -33,6 +33,9 @@ def test_python_m_detp_bake_bakes_applies_and_saves(tmp_path, bpy):
     phases = set(report["seconds"])  # the report names every phase (no timing is checked)
     assert phases >= {"export", "trace", "estimate", "write"}
     assert report["settings"]["bounces"] == 4  # the scene's Cycles diffuse bounces
+    assert report["export"]["evaluation"] == "render" and report["export"]["bytes_per_triangle"] > 0
+    assert report["memory"]["estimate_mb"] > 0 and report["memory"]["peak_mb"] > 0
+    assert report["direct"]["mode"] == "sampled" and set(report["noise"]) == {"Floor", "TallBox"}
     for name in ("Floor.photon_map.exr", "Floor.photon_map.png", "TallBox.photon_map.exr"):
         assert (out / name).stat().st_size > 0
     assert not list(out.glob(".*partial*"))
