@@ -124,7 +124,10 @@ class DETPBAKE_OT_bake(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return not DETPBAKE_OT_bake._running and context.scene is not None
+        if DETPBAKE_OT_bake._running:
+            cls.poll_message_set("a bake is running: wait for it or press Esc")
+            return False
+        return context.scene is not None
 
     def _prepare(self, context):
         job = BakeJob(context)

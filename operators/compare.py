@@ -108,6 +108,14 @@ class DETPBAKE_OT_compare(bpy.types.Operator):
     estimators: EnumProperty(name="Estimators", options={"ENUM_FLAG"}, items=ESTIMATORS,
                              default={"photon_map", "sphere_cache", "disc_index"})
 
+    @classmethod
+    def poll(cls, context):
+        from .bake import DETPBAKE_OT_bake
+        if DETPBAKE_OT_bake._running:
+            cls.poll_message_set("a bake is running: wait for it or press Esc")
+            return False
+        return context.scene is not None
+
     def invoke(self, context, event):
         self.estimators = set(context.scene.detp_bake.compare_estimators)
         return self.execute(context)

@@ -295,3 +295,14 @@ def test_an_instance_selected_says_how_to_bake_it_and_hidden_meshes_that_render_
         o.select_set(False)
     names = {o.name for o in common.bake_targets(bpy.context)}
     assert "TallBox" in names and "ShortBox" not in names and "Floor" in names
+
+
+def test_compare_and_bake_are_greyed_out_while_a_bake_runs(addon, cornell, bpy):
+    """Two bakes at once would share numba's thread pool: while one runs, neither operator polls."""
+    from detp_bake_addon.operators.bake import DETPBAKE_OT_bake
+    assert bpy.ops.detp_bake.compare.poll() and bpy.ops.detp_bake.bake.poll()
+    DETPBAKE_OT_bake._running = True
+    try:
+        assert not bpy.ops.detp_bake.compare.poll() and not bpy.ops.detp_bake.bake.poll()
+    finally:
+        DETPBAKE_OT_bake._running = False
