@@ -249,3 +249,9 @@ def test_export_takes_the_instances(bpy):
     assert minimum < stats["triangles"] < 30_000
     tx = texels.rasterise(scene)
     assert {lm.name for lm in tx.lightmaps} == BAKEABLE and all(lm.count > 0 for lm in tx.lightmaps)
+    # Everything F12 renders, once: the curve is not doubled by its own geometry listed as an
+    # instance of itself; the floor's and the leaves' images, the leaves' alpha and the HDRI arrive.
+    assert stats["triangles"] == 24 + 3 * 10 + 50 + 12 + 768 + 588 + 3 * 210
+    assert stats["instances"] == 6 and stats["textures"] == 2
+    assert (scene.opacity_texture >= 0).sum() == 3 * 64 and (scene.albedo_texture >= 0).sum() >= 24
+    assert scene.world_map is not None and scene.world_map.radiance.max() > 100

@@ -310,6 +310,8 @@ class Collector:
         for inst in depsgraph.object_instances:
             ob = inst.object
             parent = inst.parent if inst.is_instance else None
+            if parent is not None and parent.original == ob.original:
+                continue  # a curve's or text's own geometry, listed again as an instance of itself
             source = ob.original.name
             owner = f"{parent.original.name} (instances)" if parent is not None else source
             if ob.type == "LIGHT":
