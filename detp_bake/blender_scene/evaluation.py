@@ -20,6 +20,7 @@ from .materials import SlotRows, TextureTable, corner_colours, corner_uvs, rende
 from ..scene import MAX_POWER, MAX_SIZE, AreaLight, BakeObject, PointLight, SpotLight, SunLight
 
 GEOMETRY_TYPES = ("MESH", "CURVE", "SURFACE", "FONT", "META")
+_SELF_LISTED = ("CURVE", "SURFACE", "FONT")  # Blender lists their evaluated mesh twice: as themselves and as an instance
 NOT_EXPORTED = {"CURVES": "hair curves", "POINTCLOUD": "point clouds", "VOLUME": "volumes"}
 _JOB: dict = {}
 
@@ -310,8 +311,8 @@ class Collector:
         for inst in depsgraph.object_instances:
             ob = inst.object
             parent = inst.parent if inst.is_instance else None
-            if parent is not None and parent.original == ob.original:
-                continue  # a curve's or text's own geometry, listed again as an instance of itself
+            if parent is not None and parent.original == ob.original and parent.type in _SELF_LISTED:
+                continue  # a curve's, text's or surface's own geometry, listed again as an instance of itself
             source = ob.original.name
             owner = f"{parent.original.name} (instances)" if parent is not None else source
             if ob.type == "LIGHT":
