@@ -31,9 +31,9 @@ def test_a_thousand_bounces_in_a_white_room_bound_the_batch_by_segments():
     sc = make_scene([("Sphere", uv_sphere(1.0, 12, 24, inward=True), 1.0, True)],
                     [PointLight("Lamp", np.zeros(3), np.full(3, 10.0))], resolution=16)
     assert memory.segments_per_photon(1.0, 1000) == 1001
-    r = compute(sc, BakeSettings(photons=8000, bounces=1000, denoise=False))
+    r = compute(sc, BakeSettings(photons=5000, bounces=1000, denoise=False))
     assert r.memory["batch_photons"] == memory.MAX_BATCH_SEGMENTS // 1001
-    assert r.stats.segments > 5_000_000  # it really did bounce that much
+    assert r.stats.segments > 4_000_000  # it really did bounce that much
     # The estimate is of the right size: within a factor of two of the peak this process reached.
     assert r.memory["estimate_mb"] < 2000 and 0.5 < r.memory["estimate_mb"] / r.memory["peak_mb"] < 2.0
     report = r.report()
