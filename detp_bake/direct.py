@@ -34,9 +34,9 @@ import numba
 import numpy as np
 
 from .errors import BakeCancelled, BakeError
-from .lights import _spot_att
-from .sampling import (cone_lobe, cosine_hemisphere, in_frame, jit, orthonormal_basis, photon_rng, seed_key,
-                       uniform2, uniform_disc, uniform_triangle)
+from .lights import _spot_att, emissive_triangles
+from .sampling import (cone_lobe, cosine_hemisphere, in_frame, jit, orthonormal_basis, photon_rng, search_cdf,
+                       seed_key, uniform2, uniform_disc, uniform_triangle)
 from .environment import environment_rays
 from .scattering import MAX_PASSES
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
@@ -128,18 +128,10 @@ def direct_lights(scene: Scene, samples: int) -> list[DirectLight]:
 
 
 def _mesh_light(scene: Scene, samples: int) -> Optional[DirectLight]:
-    lum = np.abs(scene.emission).mean(axis=1)
-    tri = np.flatnonzero(lum > 0.0)
-    if tri.size == 0:
+    found = emissive_triangles(scene)
+    if found is None:
         return None
-    p = scene.positions[tri].astype(np.float64)
-    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    area = 0.5 * np.linalg.norm(cross, axis=1)
-    keep = area > 0.0
-    tri, p, cross, area = tri[keep], p[keep], cross[keep], area[keep]
-    if tri.size == 0:
-        return None
-    normal = cross / (2.0 * area[:, None])
+    tri, p, normal, area = found
     radiance = scene.emission[tri].astype(np.float64)
     w = np.abs(radiance).mean(axis=1) * area
     cdf = np.cumsum(w)
@@ -171,7 +163,6 @@ def _shadow_rays(kind, prm, samples, key, a, b, pos, nrm, geo, eps,
     (light behind the surface, outside a spot cone) are left out. Returns the ray count."""
     k = 0
     inv_s = 1.0 / samples
-    last = cdf.shape[0] - 1
     for i in range(a, b):
         px, py, pz = pos[i, 0], pos[i, 1], pos[i, 2]
         nx, ny, nz = nrm[i, 0], nrm[i, 1], nrm[i, 2]
@@ -257,13 +248,7 @@ def _shadow_rays(kind, prm, samples, key, a, b, pos, nrm, geo, eps,
                 w0, w1, w2 = prm[18] * scale, prm[19] * scale, prm[20] * scale
                 far = dist
             elif kind == MESH:
-                lo, hi = 0, last
-                while lo < hi:
-                    mid = (lo + hi) // 2
-                    if cdf[mid] <= u0:
-                        lo = mid + 1
-                    else:
-                        hi = mid
+                lo = search_cdf(cdf, u0)
                 below = cdf[lo - 1] if lo > 0 else 0.0
                 v0 = (u0 - below) / max(cdf[lo] - below, 1e-300)
                 v0 = min(max(v0, 0.0), 0.999999999)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .lights import Emitter
-from .sampling import inline, jit, orthonormal_basis, photon_rng, uniform2, uniform_disc
+from .sampling import inline, jit, orthonormal_basis, photon_rng, search_cdf, uniform2, uniform_disc
 
 
 @dataclass
@@ -53,25 +53,13 @@ class EnvironmentMap:
 
 
 @inline
-def _search(cdf, u):
-    lo, hi = 0, cdf.shape[0] - 1
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if cdf[mid] <= u:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@inline
 def sample_direction(marginal, cond, prob, rot, u0, u1):
     """(world direction x, y, z, its density p(ω), pixel index) for two uniforms."""
     h, w = cond.shape[0], cond.shape[1]
-    row = _search(marginal, u0)
+    row = search_cdf(marginal, u0)
     below = marginal[row - 1] if row > 0 else 0.0
     fy = (u0 - below) / max(marginal[row] - below, 1e-300)
-    col = _search(cond[row], u1)
+    col = search_cdf(cond[row], u1)
     left = cond[row, col - 1] if col > 0 else 0.0
     fx = (u1 - left) / max(cond[row, col] - left, 1e-300)
     u = (col + min(max(fx, 0.0), 1.0)) / w

@@ -15,6 +15,7 @@ from typing import Callable
 import numpy as np
 
 from .sampling import (cone_lobe, cosine_hemisphere, cosine_lobe, in_frame, inline, jit, orthonormal_basis,
+                       search_cdf,
                        photon_rng, uniform2, uniform_disc, uniform_sphere, uniform_triangle)
 from .errors import BakeError
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
@@ -303,7 +304,6 @@ def area_emitter(light: AreaLight) -> Emitter:
 @jit
 def _emit_mesh(key, first, n, cdf, p, normal, tri_flux, offset, o, d, f, rng):
     """tri_flux: each triangle's RGB flux over its probability and over total_count."""
-    last = cdf.shape[0] - 1
     buf, state = _block()
     for a in range(0, n, BLOCK):
         b = min(n, a + BLOCK)
@@ -311,13 +311,7 @@ def _emit_mesh(key, first, n, cdf, p, normal, tri_flux, offset, o, d, f, rng):
             k = i - a
             r, u0, u1, u2, u3 = _draw4(key, first + i)
             r, u4, u5 = uniform2(r)
-            lo, hi = 0, last  # the first triangle whose cdf exceeds u0
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if cdf[mid] <= u0:
-                    lo = mid + 1
-                else:
-                    hi = mid
+            lo = search_cdf(cdf, u0)
             b0, b1, b2 = uniform_triangle(u1, u2)
             side = 1.0 if u5 < 0.5 else -1.0
             nx, ny, nz = side * normal[lo, 0], side * normal[lo, 1], side * normal[lo, 2]
@@ -331,20 +325,28 @@ def _emit_mesh(key, first, n, cdf, p, normal, tri_flux, offset, o, d, f, rng):
         _flush(buf, state, a, b, o, d, f, rng)
 
 
-def mesh_emitter(scene: Scene, offset: float) -> Emitter | None:
-    """Emissive triangles: Lambertian from BOTH faces, as Cycles emits (measured, DESIGN.md §3
-    calibration), so each triangle emits 2·π·L·A. Photons start `offset` off the surface so they
-    do not hit their own triangle."""
-    lum = scene.emission.mean(axis=1)
-    tri = np.flatnonzero(lum > 0.0)
-    if tri.size == 0:
-        return None
+def emissive_triangles(scene: Scene):
+    """(triangle indices, corners (n, 3, 3), unit normals, areas) of the emitting triangles with an
+    area, or None when nothing emits."""
+    tri = np.flatnonzero(np.abs(scene.emission).mean(axis=1) > 0.0)
     p = scene.positions[tri].astype(np.float64)
     cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     area = 0.5 * np.linalg.norm(cross, axis=1)
     keep = area > 0.0
+    if not keep.any():
+        return None
     tri, p, cross, area = tri[keep], p[keep], cross[keep], area[keep]
-    normal = cross / (2.0 * area[:, None])
+    return tri, p, cross / (2.0 * area[:, None]), area
+
+
+def mesh_emitter(scene: Scene, offset: float) -> Emitter | None:
+    """Emissive triangles: Lambertian from BOTH faces, as Cycles emits (measured, DESIGN.md §3
+    calibration), so each triangle emits 2·π·L·A. Photons start `offset` off the surface so they
+    do not hit their own triangle."""
+    found = emissive_triangles(scene)
+    if found is None:
+        return None
+    tri, p, normal, area = found
     tri_flux = 2.0 * np.pi * scene.emission[tri].astype(np.float64) * area[:, None]
     flux = tri_flux.sum(axis=0)
     w = tri_flux.mean(axis=1)

@@ -163,6 +163,19 @@ def uniform_disc(u1, u2):
 
 
 @inline
+def search_cdf(cdf, u):
+    """The first index whose cumulative probability exceeds u (binary search)."""
+    lo, hi = 0, cdf.shape[0] - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if cdf[mid] <= u:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@inline
 def uniform_triangle(u1, u2):
     """Barycentric weights uniform over a triangle."""
     su = math.sqrt(u1)
