@@ -30,7 +30,7 @@ import bpy
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from make_cornell_box import add_lightmap_uv  # noqa: E402
 from make_patio import box, quad_grid  # noqa: E402
-from make_tree import (MeshBuilder, add_camera, make_material, mesh_triangles, save,  # noqa: E402
+from make_tree import (MeshBuilder, generate, add_camera, make_material,  # noqa: E402
                        set_render, set_world)
 
 HEIGHT = 2.7
@@ -111,12 +111,7 @@ def build_l_room():
 
 def main(argv=None):
     """Build the scene and save it to argv[0] (default: l_room.blend here)."""
-    argv = sys.argv[1:] if argv is None else list(argv)
-    output = os.path.abspath(argv[0] if argv else DEFAULT_OUTPUT)
-    scene = build_l_room()
-    print("Triangles:", sum(mesh_triangles(scene).values()))
-    save(output)
-    return output
+    return generate(build_l_room, DEFAULT_OUTPUT, argv)
 
 
 if __name__ == "__main__":

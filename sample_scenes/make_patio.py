@@ -33,8 +33,8 @@ import bpy
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from make_tree import (MeshBuilder, add_camera, add_leaves, add_object, add_sun,  # noqa: E402
-                       make_material, mesh_triangles, normalised, save, set_render, set_world, tube)
+from make_tree import (MeshBuilder, generate, add_camera, add_leaves, add_object, add_sun,  # noqa: E402
+                       make_material, normalised, set_render, set_world, tube)
 
 TRIANGLES = 122_318
 SEED = 2005
@@ -356,12 +356,7 @@ def build_patio(triangles=TRIANGLES, seed=SEED, lightmaps=True):
 
 def main(argv=None):
     """Build the scene and save it to argv[0] (default: patio.blend here)."""
-    argv = sys.argv[1:] if argv is None else list(argv)
-    output = os.path.abspath(argv[0] if argv else DEFAULT_OUTPUT)
-    scene = build_patio()
-    print("Triangles:", sum(mesh_triangles(scene).values()))
-    save(output)
-    return output
+    return generate(build_patio, DEFAULT_OUTPUT, argv)
 
 
 if __name__ == "__main__":

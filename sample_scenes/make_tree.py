@@ -464,14 +464,20 @@ def build_tree(triangles=TRIANGLES, seed=SEED, lightmaps=True):
     return scene
 
 
-def main(argv=None):
-    """Build the scene and save it to argv[0] (default: tree.blend here)."""
+def generate(build, default_output: str, argv=None) -> str:
+    """Build a scene with `build()` and save it to argv[0] (default: `default_output`): every
+    generator's command line."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    output = os.path.abspath(argv[0] if argv else DEFAULT_OUTPUT)
-    scene = build_tree()
+    output = os.path.abspath(argv[0] if argv else default_output)
+    scene = build()
     print("Triangles:", sum(mesh_triangles(scene).values()))
     save(output)
     return output
+
+
+def main(argv=None):
+    """Build the scene and save it to argv[0] (default: tree.blend here)."""
+    return generate(build_tree, DEFAULT_OUTPUT, argv)
 
 
 if __name__ == "__main__":
