@@ -86,7 +86,8 @@ def bench_scene(label, scene, photons, radii, qs):
     seconds, est = run("photon_map", texels, batches, context, k=100)
     pm = {"scene": label, "estimator": "photon_map", "k": 100, "seconds": seconds, **est.counters}
     return {"scene": label, "triangles": scene.triangle_count, "texels": len(texels), "photons": photons,
-            "segments": tracer.stats.segments, "trace_seconds": tracer.stats.seconds, "threads": numba.get_num_threads(),
+            "segments": tracer.stats.segments, "trace_seconds": tracer.stats.seconds,
+            "threads": numba.get_num_threads(),
             "radius_sweep": rows, "q_sweep": q_rows, "photon_map": pm}
 
 
@@ -231,10 +232,12 @@ def profile(resolutions, radii, photons, baseline, repeat):
                 if "baseline" in best:
                     a, b = best["baseline"], best["new"]
                     same = a["counters"]["crossings"] == b["counters"]["crossings"]
-                    diff = float(np.max(np.abs(a["irradiance"] - b["irradiance"]) / np.maximum(np.abs(a["irradiance"]), 1e-300)))
+                    ea, eb = a["irradiance"], b["irradiance"]
+                    diff = float(np.max(np.abs(ea - eb) / np.maximum(np.abs(ea), 1e-300)))
                     print(f"    baseline/new: clearance {a['clearance'][0] / b['clearance'][0]:.2f}x, build "
                           f"{a['build'][0] / b['build'][0]:.2f}x, query {a['query'][0] / b['query'][0]:.2f}x "
-                          f"(cpu {a['query'][1] / b['query'][1]:.2f}x); same crossings: {same}, max rel. diff {diff:.1e}")
+                          f"(cpu {a['query'][1] / b['query'][1]:.2f}x); same crossings: {same}, "
+                          f"max rel. diff {diff:.1e}")
     return {"cores": os.cpu_count(), "threads": numba.get_num_threads(), "photons": photons, "rows": rows}
 
 
@@ -290,7 +293,8 @@ def build_scale(planes, radii, baseline, repeat):
                        "clearance_s_per_mdisc": b["clearance"][0] / len(texels) * 1e6,
                        "build_s_per_mdisc": b["build"][0] / len(texels) * 1e6}
                 rows.append(row)
-                print(f"{count}x{size}² ({len(texels) / 1e6:.1f}M discs) r={r} {name:>9}: build {row['build_s']:.2f} s "
+                print(f"{count}x{size}² ({len(texels) / 1e6:.1f}M discs) r={r} {name:>9}: "
+                      f"build {row['build_s']:.2f} s "
                       f"({row['build_s_per_mdisc']:.2f} s/M), clearance {row['clearance_s']:.2f} s "
                       f"({row['clearance_s_per_mdisc']:.2f} s/M); load {os.getloadavg()[0]:.1f}")
     return {"cores": os.cpu_count(), "threads": numba.get_num_threads(), "rows": rows}

@@ -142,3 +142,83 @@ def test_tangent_clearance_casts_rays_only_where_they_can_hit_and_gets_the_same_
         ref[prim >= 0] = np.minimum(ref[prim >= 0], dist[prim >= 0])
     assert np.array_equal(got, ref)
     assert 0.05 < np.mean(ref < reach) < 0.8  # some texels are cut, most are not
+
+
+def _lattice_case(seed, n_segments=6000, noise=0.0):
+    """Texels of three flat lightmaps (one tilted, one with holes, one with 1e-13 noise, all moved
+    in their plane by `noise` texels more) and segments aimed at their discs' rims: ending on the
+    plane, through it, in and just past the slab, grazing, arriving from behind."""
+    from detp_bake.photons import PhotonBatch
+    from detp_bake.texels import Lightmap, TexelSet
+
+    rng = np.random.default_rng(seed)
+    size, texel = 24, 0.05
+    frames = [((0.0, 0.0, 0.0), (1, 0, 0), (0, 1, 0)),
+              ((0.3, -0.2, 0.5), (0.8, 0.6, 0.0), (-0.36, 0.48, 0.8)),
+              ((-1.5, 0.4, 0.2), (0, 0, 1), (1, 0, 0))]
+    pos, nrm, pix, lms = [], [], [], []
+    for k, (origin, u, v) in enumerate(frames):
+        u, v = np.asarray(u, float) / np.linalg.norm(u), np.asarray(v, float) / np.linalg.norm(v)
+        i, j = np.meshgrid(np.arange(size), np.arange(size), indexing="xy")
+        i, j = i.ravel(), j.ravel()
+        keep = np.ones(len(i), bool) if k != 2 else rng.random(len(i)) > 0.2
+        i, j = i[keep], j[keep]
+        p = np.asarray(origin) + ((i + 0.5) * texel)[:, None] * u + ((j + 0.5) * texel)[:, None] * v
+        if k == 1:
+            p = p + rng.normal(scale=1e-13, size=p.shape)
+        shift = rng.normal(scale=noise * texel, size=(len(p), 2))
+        p = p + shift[:, :1] * u + shift[:, 1:] * v
+        pos.append(p)
+        nrm.append(np.tile(np.cross(u, v), (len(p), 1)))
+        pix.append(j * size + i)
+        lms.append(Lightmap(f"plane{k}", k, size, size, sum(len(x) for x in pos[:-1]), len(p), texel))
+    pos, nrm, pix = np.concatenate(pos), np.concatenate(nrm), np.concatenate(pix)
+    n = len(pos)
+    texels = TexelSet(pos, nrm, np.zeros(n, np.int32), pix, np.full(n, texel ** 2), np.ones(n, bool), lms)
+    # Targets near disc rims (radius 1.5 or 4 texels) and anywhere; segments arrive from random sides.
+    c = rng.integers(0, n, n_segments)
+    inplane = rng.normal(size=(n_segments, 3))
+    inplane -= (inplane * nrm[c]).sum(1)[:, None] * nrm[c]
+    inplane /= np.linalg.norm(inplane, axis=1)[:, None]
+    rim = texel * rng.choice([1.5, 4.0, 0.7, 2.3], n_segments) * (1 + rng.choice([0, 1e-15, -1e-15, 1e-9], n_segments))
+    target = pos[c] + rim[:, None] * inplane
+    # On the plane, through it, within the slab of 1.5- or 4-texel discs, or just past it.
+    slab = 0.25 * texel * rng.choice([1.5, 4.0], n_segments)
+    height = rng.choice([0.0, 0.0, 1e-12, -0.5, 0.3, 1.0, 1.3], n_segments) * slab
+    target += height[:, None] * nrm[c]
+    w = rng.normal(size=(n_segments, 3))
+    w -= 1.2 * np.abs((w * nrm[c]).sum(1))[:, None] * nrm[c]  # mostly arriving from the front
+    graze = rng.random(n_segments) < 0.1
+    w[graze] = inplane[graze] - rng.choice([1e-3, 1e-7, 1e-11], graze.sum())[:, None] * nrm[c][graze]
+    w /= np.linalg.norm(w, axis=1)[:, None]
+    length = rng.uniform(0.05, 2.0, n_segments)
+    o = target - w * length[:, None]
+    flux = rng.uniform(0.1, 1.0, (n_segments, 3))
+    batch = PhotonBatch(n_segments, o.astype(np.float32), w.astype(np.float32), length.astype(np.float32),
+                        flux.astype(np.float32), *(np.zeros((0, 3), np.float32),) * 4, np.zeros(0, np.int32))
+    return texels, batch
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("radius_texels", [1.5, 4.0])
+@pytest.mark.parametrize("kernel", ["constant", "epanechnikov"])
+@pytest.mark.parametrize("noise", [0.0, 1e-3])
+def test_lattice_patches_find_the_oracles_crossings(seed, radius_texels, kernel, noise, monkeypatch):
+    """With noise, the patches' lattice tolerance is widened to take the noisy lattices in: then
+    the margins, not rounding alone, decide which discs near a rim get the exact test (without
+    them, this test fails)."""
+    from detp_bake.estimators import patches
+
+    if noise:
+        monkeypatch.setattr(patches, "LATTICE_TOL", 0.1)
+    texels, batch = _lattice_case(seed, noise=noise)
+    settings = dict(radius_texels=radius_texels, kernel=kernel)
+    ref = run("detp", texels, [batch], **settings)
+    got = run("disc_index", texels, split(batch, 3), **settings)
+    assert got.counters["patches"] > 20 and got.counters["patch_visits"] > 1000
+    assert got.counters["crossings"] == ref.counters["crossings"] > 1000
+    assert np.allclose(got.irradiance, ref.irradiance, rtol=1e-9, atol=0)
+    monkeypatch.setattr(disc_index, "PATCHES", False)
+    loose = run("disc_index", texels, split(batch, 3), **settings)
+    assert loose.counters["patches"] == 0
+    assert np.array_equal(loose.irradiance, got.irradiance)  # the same additions in the same order

@@ -31,11 +31,18 @@ LO, HI, AXIS, CONE = 0, 3, 6, 9
 
 @dataclass
 class DiscTree:
+    """The tree over items (loose discs and lattice patches, patches.py), discs in item order."""
     order: np.ndarray  # (n,) int64: the disc at each sorted position
     node: np.ndarray  # (m, 10) float32: box lo, box hi, cone axis, cone threshold
     left: np.ndarray  # (m,) int32: first child (the second is left + 1), -1 for a leaf
     first: np.ndarray  # (m,) int32: first sorted disc under the node
     count: np.ndarray  # (m,) int32: discs under the node
+    item_first: np.ndarray  # (m,) int32: first item under the node
+    item_count: np.ndarray  # (m,) int32: items under the node
+    item_disc: np.ndarray  # (items + 1,) int64: first sorted disc of each item
+    item_patch: np.ndarray  # (items,) int32: the item's patch, −1 for a loose disc
+    patch_geo: np.ndarray  # (patches, patches.GEO) float64: lattice, normal, radius, tolerances
+    patch_site: np.ndarray  # (patches, SIDE²) int32: sorted disc at each lattice site, −1 for none
     clusters: np.ndarray  # (k,) int32: roots of the subtrees that are the units of parallel work
 
     @property
@@ -48,13 +55,15 @@ class DiscTree:
 
 
 @numba.njit(cache=True)
-def _topology(codes, leaf):
-    """Radix splits of the sorted codes, depth first; a parent always comes before its children."""
+def _topology(codes, leaf, item_disc):
+    """Radix splits of the items' sorted codes, depth first (a parent before its children). A
+    node is a leaf when it holds one item or at most `leaf` discs; item_disc[k] is item k's first
+    disc, so node ranges come out in items and in discs."""
     n = codes.shape[0]
     cap = 2 * n + 1
     left = np.full(cap, -1, np.int32)
-    first = np.zeros(cap, np.int32)
-    count = np.zeros(cap, np.int32)
+    ifirst = np.zeros(cap, np.int32)
+    icount = np.zeros(cap, np.int32)
     stack = np.empty((256, 3), np.int64)
     stack[0, 0], stack[0, 1], stack[0, 2] = 0, 0, n
     sp = 1
@@ -62,9 +71,9 @@ def _topology(codes, leaf):
     while sp > 0:
         sp -= 1
         node, a, b = stack[sp, 0], stack[sp, 1], stack[sp, 2]
-        first[node] = a
-        count[node] = b - a
-        if b - a <= leaf:
+        ifirst[node] = a
+        icount[node] = b - a
+        if b - a <= 1 or item_disc[b] - item_disc[a] <= leaf:
             continue
         mid = (a + b) // 2
         diff = codes[a] ^ codes[b - 1]
@@ -87,7 +96,72 @@ def _topology(codes, leaf):
         stack[sp, 0], stack[sp, 1], stack[sp, 2] = child + 1, mid, b
         stack[sp + 1, 0], stack[sp + 1, 1], stack[sp + 1, 2] = child, a, mid
         sp += 2
-    return left[:used].copy(), first[:used].copy(), count[:used].copy()
+    left, ifirst, icount = left[:used].copy(), ifirst[:used].copy(), icount[:used].copy()
+    first = np.empty(used, np.int32)
+    count = np.empty(used, np.int32)
+    for k in range(used):
+        first[k] = item_disc[ifirst[k]]
+        count[k] = item_disc[ifirst[k] + icount[k]] - first[k]
+    return left, first, count, ifirst, icount
+
+
+@numba.njit(cache=True)
+def _items(centre, patch_of, site_of, patches, side):
+    """Items: every patch (at the mean of its discs) and every loose disc. Returns the items'
+    centres and patches, and per patch its discs by lattice site."""
+    n = centre.shape[0]
+    loose = 0
+    for d in range(n):
+        loose += patch_of[d] < 0
+    items = patches + loose
+    where = np.zeros((items, 3))
+    item_patch = np.full(items, -1, np.int32)
+    item_one = np.full(items, -1, np.int64)  # a loose item's disc
+    by_site = np.full((patches, side * side), -1, np.int64)
+    size = np.zeros(patches, np.int64)
+    k = patches
+    for d in range(n):
+        p = patch_of[d]
+        if p >= 0:
+            by_site[p, site_of[d]] = d
+            size[p] += 1
+            for c in range(3):
+                where[p, c] += centre[d, c]
+        else:
+            item_one[k] = d
+            for c in range(3):
+                where[k, c] = centre[d, c]
+            k += 1
+    for p in range(patches):
+        item_patch[p] = p
+        for c in range(3):
+            where[p, c] /= size[p]
+    return where, item_patch, item_one, by_site
+
+
+@numba.njit(cache=True)
+def _disc_order(item_order, item_patch, item_one, by_site, n):
+    """Discs in item order (a patch's by site) and each item's first disc; the patches' sites as
+    sorted disc positions."""
+    order = np.empty(n, np.int64)
+    item_disc = np.empty(item_order.shape[0] + 1, np.int64)
+    site = np.full(by_site.shape, -1, np.int32)
+    pos = 0
+    for k in range(item_order.shape[0]):
+        it = item_order[k]
+        item_disc[k] = pos
+        p = item_patch[it]
+        if p < 0:
+            order[pos] = item_one[it]
+            pos += 1
+            continue
+        for s in range(by_site.shape[1]):
+            if by_site[p, s] >= 0:
+                order[pos] = by_site[p, s]
+                site[p, s] = pos
+                pos += 1
+    item_disc[item_order.shape[0]] = pos
+    return order, item_disc, site
 
 
 @numba.njit(cache=True, inline="always")
@@ -252,24 +326,32 @@ def _depth(left):
 
 
 def build(centre: np.ndarray, normal: np.ndarray, radius: np.ndarray, slab: np.ndarray, eps: float,
-          leaf: int = LEAF_SIZE, cluster: int = 1 << 14) -> tuple[DiscTree, np.ndarray, dict]:
-    """The tree over the discs, their data in tree order (gather_discs) and seconds per step."""
+          leaf: int = LEAF_SIZE, cluster: int = 1 << 14, patch_of=None, site_of=None, patch_geo=None,
+          side: int = 8) -> tuple[DiscTree, np.ndarray, dict]:
+    """The tree over the discs (grouped in patches where patch_of ≥ 0, at lattice site site_of),
+    their data in tree order (gather_discs) and seconds per step."""
     import time
 
     t0 = time.perf_counter()
+    n = len(radius)
     centre = np.ascontiguousarray(centre, np.float64)
-    codes = morton_codes(centre)
-    order = np.argsort(codes)  # the tree depends on ties' order, the estimate does not
-    codes = codes[order]
+    if patch_of is None:
+        patch_of, site_of, patch_geo = np.full(n, -1, np.int64), np.full(n, -1, np.int64), np.zeros((0, 1))
+    where, item_patch, item_one, by_site = _items(centre, patch_of, site_of, len(patch_geo), side)
+    codes = morton_codes(where)
+    item_order = np.argsort(codes)  # the tree depends on ties' order, the estimate does not
+    codes = codes[item_order]
+    order, item_disc, site = _disc_order(item_order, item_patch, item_one, by_site, n)
     disc = gather_discs(order, centre, np.ascontiguousarray(normal, np.float64),
                         np.ascontiguousarray(radius, np.float64), np.ascontiguousarray(slab, np.float64))
     t1 = time.perf_counter()
-    left, first, count = _topology(codes, int(leaf))
+    left, first, count, ifirst, icount = _topology(codes, int(leaf), item_disc)
     node = np.empty((len(left), 10), np.float32)
     spread = np.empty(len(left))
     _leaves(disc, float(eps), left, first, count, node, spread)
     _inner(left, count, node, spread)
-    tree = DiscTree(order, node, left, first, count, _clusters(left, count, int(cluster)))
+    tree = DiscTree(order, node, left, first, count, ifirst, icount, item_disc, item_patch[item_order], patch_geo,
+                    site, _clusters(left, count, int(cluster)))
     t2 = time.perf_counter()
     return tree, disc, {"sort": t1 - t0, "tree": t2 - t1}
 
@@ -351,7 +433,7 @@ def discs_meet_triangles(positions: np.ndarray, origin: np.ndarray, normal: np.n
     lo, hi = tri.min(axis=1), tri.max(axis=1)
     codes = morton_codes(0.5 * (lo + hi))
     order = np.argsort(codes)
-    left, first, count = _topology(codes[order], LEAF_SIZE)
+    left, first, count, _, _ = _topology(codes[order], LEAF_SIZE, np.arange(len(tri) + 1))
     node = np.zeros((len(left), 10), np.float32)
     _box_leaves(lo, hi, order, left, first, count, node)
     _box_inner(left, node)

@@ -26,8 +26,11 @@ from . import Estimate, Estimator, register
 from .bvh import AXIS, CONE, HI, LO, build
 from .discs import crossing_weight, make_discs
 from .morton import segment_order
+from . import patches
+from .patches import SIDE, form_patches, group_keys, patch_splat
 
 LEAF = 4  # discs per leaf
+PATCHES = True  # flat charts' texels as lattice patches (patches.py)
 CLUSTER = 1 << 14  # discs per unit of parallel work: fewer means more binning, more means worse balance
 BIN_CHUNK = 1 << 12  # segments per binning task
 STACK = 256  # deeper than any tree over 63-bit codes
@@ -128,8 +131,8 @@ def _lists(seg, clu, used, clusters):
 
 
 @numba.njit(cache=True, parallel=True)
-def _splat(o, w, length, flux, eps, kernel, node, left, first, count, roots, disc, start, lists, schedule,
-           acc, stats):
+def _splat(o, w, length, flux, eps, kernel, node, left, item_first, item_count, item_disc, item_patch, patch_geo,
+           patch_site, roots, disc, start, lists, schedule, acc, stats):
     """Step 3: each cluster walks its segments through its subtree; its discs are its own."""
     for s in numba.prange(schedule.shape[0]):
         c = schedule[s]
@@ -137,6 +140,7 @@ def _splat(o, w, length, flux, eps, kernel, node, left, first, count, roots, dis
         node_tests = 0
         disc_tests = 0
         crossings = 0
+        patch_visits = 0
         for e in range(start[c], start[c + 1]):
             i = lists[e]
             ox, oy, oz, wx, wy, wz, ix, iy, iz, tmax = _ray(o, w, length, i, eps)
@@ -146,7 +150,16 @@ def _splat(o, w, length, flux, eps, kernel, node, left, first, count, roots, dis
                 sp -= 1
                 nd = stack[sp]
                 if left[nd] < 0:
-                    for j in range(first[nd], first[nd] + count[nd]):
+                    for it in range(item_first[nd], item_first[nd] + item_count[nd]):
+                        p = item_patch[it]
+                        if p >= 0:
+                            patch_visits += 1
+                            tests, hits = patch_splat(p, patch_geo, patch_site, disc, o, w, length, flux, i, eps,
+                                                      kernel, acc)
+                            disc_tests += tests
+                            crossings += hits
+                            continue
+                        j = item_disc[it]
                         disc_tests += 1
                         k = crossing_weight(o[i, 0], o[i, 1], o[i, 2], w[i, 0], w[i, 1], w[i, 2], length[i],
                                             disc[0, j], disc[1, j], disc[2, j], disc[3, j], disc[4, j], disc[5, j],
@@ -165,6 +178,7 @@ def _splat(o, w, length, flux, eps, kernel, node, left, first, count, roots, dis
         stats[c, 0] += node_tests
         stats[c, 1] += disc_tests
         stats[c, 2] += crossings
+        stats[c, 4] += patch_visits
 
 
 @register
@@ -177,17 +191,31 @@ class DiscIndex(Estimator):
         t0 = time.perf_counter()
         d = make_discs(texels, settings, self.context.scene_radius, self.context.clearance)
         self.eps, self.kernel = d.eps, d.kernel
+        patch_of = site_of = geo = None
+        t1 = time.perf_counter()
+        if PATCHES and len(d):
+            lm = np.repeat(np.arange(len(texels.lightmaps)), [m.count for m in texels.lightmaps])
+            width = np.array([m.width for m in texels.lightmaps], np.int64)[lm]
+            i, j = texels.pixel % width, texels.pixel // width
+            keys = group_keys(lm, i, j)
+            by_key = np.argsort(keys, kind="stable")
+            patch_of, site_of, geo = form_patches(keys[by_key], by_key, (i % SIDE).astype(np.float64),
+                                                  (j % SIDE).astype(np.float64), d.centre, d.normal, d.radius, d.slab,
+                                                  patches.LATTICE_TOL, patches.NORMAL_TOL)
+        t2 = time.perf_counter()
         self.tree, self.disc, steps = build(d.centre, d.normal, d.radius, d.slab, d.eps, LEAF,
-                                            cluster=max(CLUSTER, len(d) // 4096))
+                                            max(CLUSTER, len(d) // 4096), patch_of, site_of, geo, SIDE)
+        steps["patches"] = t2 - t1
         self.cluster_of = np.full(self.tree.nodes, -1, np.int32)
         self.cluster_of[self.tree.clusters] = np.arange(len(self.tree.clusters), dtype=np.int32)
         self.acc = np.zeros((len(texels), 3))
-        self.stats = np.zeros((len(self.tree.clusters), 4), np.int64)  # node, disc tests, crossings, entries
+        self.stats = np.zeros((len(self.tree.clusters), 5), np.int64)  # node, disc tests, crossings, entries, patches
         self.bin_tests = 0
         self.bin_slots = 4  # pairs kept per segment of a chunk; doubled when a chunk overflows
         self.segments = 0
-        self.seconds = {"build": time.perf_counter() - t0, "build_sort": steps["sort"],
-                        "build_tree": steps["tree"], "query": 0.0, "query_order": 0.0, "query_bin": 0.0,
+        self.seconds = {"build": time.perf_counter() - t0, "build_patches": steps["patches"],
+                        "build_sort": steps["sort"], "build_tree": steps["tree"], "query": 0.0, "query_order": 0.0,
+                        "query_bin": 0.0,
                         "query_splat": 0.0}
 
     def add(self, batch):
@@ -217,8 +245,9 @@ class DiscIndex(Estimator):
         schedule = np.argsort(-sizes, kind="stable").astype(np.int32)
         t2 = time.perf_counter()
         with numba.parallel_chunksize(1):
-            _splat(o, w, length, flux, self.eps, self.kernel, t.node, t.left, t.first, t.count, t.clusters,
-                   self.disc, start, lists, schedule, self.acc, self.stats)
+            _splat(o, w, length, flux, self.eps, self.kernel, t.node, t.left, t.item_first, t.item_count, t.item_disc,
+                   t.item_patch, t.patch_geo, t.patch_site, t.clusters, self.disc, start, lists, schedule, self.acc,
+                   self.stats)
         t3 = time.perf_counter()
         self.stats[:, 3] += sizes
         self.bin_tests += int(tests.sum())
@@ -238,7 +267,10 @@ class DiscIndex(Estimator):
         counters = {
             "segments": self.segments, "discs": len(self.texels), "bvh_nodes": self.tree.nodes,
             "bvh_depth": self.tree.depth, "clusters": len(self.tree.clusters),
+            "patches": len(self.tree.patch_geo),
+            "patch_discs": len(self.texels) - int((self.tree.item_patch < 0).sum()),
             "ray_node_tests": int(st[0]) + self.bin_tests, "bin_node_tests": self.bin_tests,
-            "cluster_entries": int(st[3]), "ray_disc_tests": int(st[1]), "crossings": int(st[2])}
+            "cluster_entries": int(st[3]), "patch_visits": int(st[4]), "ray_disc_tests": int(st[1]),
+            "crossings": int(st[2])}
         counters.update({f"seconds_{k}": v for k, v in self.seconds.items()})
         return Estimate(out, counters)
