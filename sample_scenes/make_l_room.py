@@ -9,9 +9,9 @@ Nine objects: the floor and the ceiling (each the L as three 3 x 3 m squares of 
 walls, one per edge of the L (SouthWall, EastWall, the two walls of the inner corner InnerNorth
 and InnerEast, NorthWall, WestWall; a terracotta west wall for colour bleeding, the others white),
 and a cabinet (a box without a bottom, rotated 20 degrees) standing in the corner square where the
-wings meet, which casts contact shadows.  Lights: a 60 W point light (radius 5 cm) in the east
-wing and a 1.2 x 0.6 m, 90 W rectangular area light under the ceiling of the north wing, emitting
-down.  Cycles on the CPU, 4 diffuse bounces.
+wings meet, which casts contact shadows.  Lights: a 60 W point light (radius 5 cm, Soft Falloff
+off) in the east wing and a 1.2 x 0.6 m, 90 W rectangular area light under the ceiling of the
+north wing, emitting down.  Cycles on the CPU, 4 diffuse bounces.
 
 Every mesh has a texture UV layer "UVMap" (first, active: coordinates in metres) and a "Lightmap"
 UV layer made by Lightmap Pack (`make_cornell_box.add_lightmap_uv`, one chart per face).
@@ -90,6 +90,7 @@ def build_l_room():
     bulb = bpy.data.lights.new("Bulb", type='POINT')
     bulb.energy = POINT_POWER
     bulb.shadow_soft_size = 0.05
+    bulb.use_soft_falloff = False  # a true sphere light, as detp_bake exports it (README: units)
     bulb_obj = bpy.data.objects.new("Bulb", bulb)
     bulb_obj.location = (5.0, 1.2, 2.1)
     scene.collection.objects.link(bulb_obj)

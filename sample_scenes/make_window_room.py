@@ -9,9 +9,10 @@ colour (0.35, 0.45, 0.6)) shines in.  There is no ground outside: whatever leave
 is gone, and most of the sun's and the sky's light falls on the outside of the shell (walls and
 roof are single faces, so their outside is their back face) and never enters.
 
-Inside, six lamps of three kinds: two 25 W point lights (radius 5 cm) on the north wall, two 80 W
-spot lights (45 degree cone) pointing down over the table, a 30 W disc area light (0.4 m) and a
-40 W rectangular area light (1.0 x 0.3 m) under the ceiling, emitting down.
+Inside, six lamps of three kinds: two 25 W point lights (radius 5 cm) 30 cm off the north wall,
+two 80 W spot lights (45 degree cone) pointing down over the table (point and spot lights with
+Soft Falloff off), a 30 W disc area light (0.4 m) and a 40 W rectangular area light
+(1.0 x 0.3 m) under the ceiling, emitting down.
 
 Eight objects: Floor, Ceiling, WindowWall (a 7 x 3 grid of quads with the three window cells left
 out), NorthWall, EastWall, WestWall (warm grey), a Table (top and four legs) and a Shelf against the
@@ -112,11 +113,14 @@ def build_window_room():
 
     add_sun(scene, SUN_STRENGTH, SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG)
     set_world(scene, SKY, 1.0)
+    # Soft Falloff off: Cycles then treats a point or spot light with a radius as the sphere light
+    # detp_bake exports (with it on, Cycles is d²/(d²+r²) dimmer within a few radii; README).
     for k, x in enumerate((1.6, 5.4)):
-        add_light(scene, f"WallLamp{k}", 'POINT', (x, sy - 0.15, 2.0), 25.0, shadow_soft_size=0.05)
+        add_light(scene, f"WallLamp{k}", 'POINT', (x, sy - 0.3, 2.0), 25.0, shadow_soft_size=0.05,
+                  use_soft_falloff=False)
     for k, x in enumerate((3.7, 4.7)):
         add_light(scene, f"Spot{k}", 'SPOT', (x, 3.0, sz - 0.3), 80.0, spot_size=math.radians(45.0),
-                  spot_blend=0.2, shadow_soft_size=0.05)  # spots point down (-Z) unrotated
+                  spot_blend=0.2, shadow_soft_size=0.05, use_soft_falloff=False)  # spots point down (-Z)
     add_light(scene, "DiscPanel", 'AREA', (1.5, 1.5, sz - 0.02), 30.0, shape='DISK', size=0.4)
     add_light(scene, "StripPanel", 'AREA', (5.8, 4.2, sz - 0.02), 40.0, shape='RECTANGLE', size=1.0, size_y=0.3)
 
