@@ -47,11 +47,22 @@ def test_paper_benchmark(tmp_path):
 
 
 def test_quality_benchmark(tmp_path):
-    _run("quality.py", "--quick", "--scenes", "cornell_box", "--out", str(tmp_path))
-    res = json.loads((tmp_path / "quality.json").read_text())["results"][0]
+    _run("quality.py", "--quick", "--scenes", "cornell_box", "--sweep-scene", "cornell_box",
+         "--compositor-check", "--out", str(tmp_path))
+    doc = json.loads((tmp_path / "quality.json").read_text())
+    res = doc["results"][0]
     methods = {r["method"] for r in res["rows"]}
-    assert {"disc_index", "photon_map", "cycles"} <= methods
-    assert all(0 < r["rmse"] < 2 for r in res["rows"])
+    assert {"cycles", "cycles+oidn", "disc_index", "disc_index/no-denoise", "disc_index/photons",
+            "photon_map"} <= methods
+    assert all(0 < r["rmse_measured"] < 2 and 0 <= r["rmse"] <= r["rmse_measured"] for r in res["rows"])
+    assert set(res["reach"]) == methods and all(set(t) == {"5%", "3%"} for t in res["reach"].values())
+    assert 0 < res["reference_noise"] < 1
+    # The sweeps bake every radius and shadow-ray count, denoised and raw, at every photon count.
+    sweep = doc["sweeps"][0]
+    knobs = {(r["knob"], r["value"], r["denoised"]) for r in sweep["rows"]}
+    assert len(knobs) == 2 * len(doc["config"]["radius_texels"] + doc["config"]["direct_samples"])
+    # Blender's Denoise node runs the same OIDN filter as denoise_lightmap(filter="RT").
+    assert doc["compositor_check"]["max_relative_difference"] < 0.01
     # The reference is cached: a second run does not bake it again.
     assert list((tmp_path / "cache").glob("cornell_box-*.npz"))
 
