@@ -97,7 +97,7 @@ class BakeSettings:
             bad("k", es.k, "the photon map needs at least 2 neighbours")
         if es.radius is not None and not (np.isfinite(es.radius) and es.radius > 0):
             bad("radius", es.radius, "must be a positive, finite number of metres")
-        if not (np.isfinite(es.radius_texels) and es.radius_texels > 0):
+        if es.radius_texels is not None and not (np.isfinite(es.radius_texels) and es.radius_texels > 0):
             bad("radius_texels", es.radius_texels, "must be a positive, finite number of texels")
         if not 0.05 <= es.q <= 0.95:
             bad("q", es.q, "the sphere cache ratio must lie between 0.05 and 0.95")
@@ -197,6 +197,9 @@ def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional
 
 def _compute_many(scene, settings, names, progress, cancel) -> dict:
     names = list(dict.fromkeys(names))
+    if settings.estimator_settings.radius_texels is None:
+        texels_wide = estimators.RADIUS_TEXELS_INDIRECT if settings.direct == "sampled" else estimators.RADIUS_TEXELS_ALL
+        settings = replace(settings, estimator_settings=replace(settings.estimator_settings, radius_texels=texels_wide))
     for name in names:
         replace(settings, estimator=name).validate()
     scene.check()

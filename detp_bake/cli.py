@@ -54,7 +54,8 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--direct-samples", type=int, default=bake_mod.BakeSettings.direct_samples,
                    help="shadow rays per texel for each light with extent (default %(default)s)")
     b.add_argument("--k", type=int, default=100, help="photon map neighbours (default 100)")
-    b.add_argument("--radius-texels", type=float, default=1.5, help="DETP disc radius in texels (default 1.5)")
+    b.add_argument("--radius-texels", type=float, default=None,
+                   help="DETP disc radius in texels (default 3 with --direct sampled, 1.5 with --direct photons)")
     b.add_argument("--radius", type=float, default=None, help="DETP disc radius in metres (overrides texels)")
     b.add_argument("--q", type=float, default=0.65, help="sphere cache radius ratio (default 0.65)")
     b.add_argument("--kernel", default="constant", choices=("constant", "epanechnikov"))

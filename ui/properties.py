@@ -42,7 +42,7 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
                               items=[("TEXELS", "Texels", "Disc radius in texels of each object's lightmap"),
                                      ("WORLD", "World", "Disc radius in scene units (metres)")],
                               description="How the DETP disc radius is given")
-    radius_texels: FloatProperty(name="Radius", default=1.5, min=0.05, soft_max=8.0,
+    radius_texels: FloatProperty(name="Radius", default=3.0, min=0.05, soft_max=8.0,
                                  description="DETP disc radius in texels: larger is smoother but blurrier")
     radius: FloatProperty(name="Radius", default=0.05, min=1e-5, subtype="DISTANCE", unit="LENGTH",
                           description="DETP disc radius in scene units")

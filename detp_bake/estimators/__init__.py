@@ -21,10 +21,17 @@ from ..texels import TexelSet
 class EstimatorSettings:
     k: int = 100  # photon map: neighbours
     normal_agreement: float = 0.8  # photon map: min cos between hit and texel normals
-    radius_texels: float = 1.5  # DETP family: disc radius in texels of each lightmap
+    # DETP family: disc radius in texels of each lightmap. None: 3 when the discs see indirect light
+    # only (it is smooth: wider discs, less noise; best at equal time, benchmarks/quality.py), 1.5 when
+    # they see every segment (the paper's mode, where discs blur hard shadows).
+    radius_texels: Optional[float] = None
     radius: Optional[float] = None  # DETP family: disc radius in metres (overrides texels)
     q: float = 0.65  # sphere cache: ratio of successive sphere radii
     kernel: str = "constant"  # DETP family: constant or epanechnikov
+
+
+RADIUS_TEXELS_INDIRECT = 3.0
+RADIUS_TEXELS_ALL = 1.5
 
 
 @dataclass

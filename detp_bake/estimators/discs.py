@@ -54,10 +54,12 @@ class Discs:
 
 
 def disc_radius(texels: TexelSet, settings) -> np.ndarray:
-    """Each texel's disc radius: `radius` metres, or `radius_texels` of its own lightmap."""
+    """Each texel's disc radius: `radius` metres, or `radius_texels` of its own lightmap (unset: the
+    paper's 1.5; the bake sets it from the direct-light mode)."""
     if settings.radius is not None:
         return np.full(len(texels), float(settings.radius))
-    return texels.per_texel([lm.texel_size for lm in texels.lightmaps]) * float(settings.radius_texels)
+    wide = settings.radius_texels if settings.radius_texels is not None else 1.5
+    return texels.per_texel([lm.texel_size for lm in texels.lightmaps]) * float(wide)
 
 
 def make_discs(texels: TexelSet, settings, scene_radius: float, clearance=None) -> Discs:
