@@ -72,14 +72,14 @@ def test_a_red_textured_wall_tints_the_floor_as_in_cycles(empty_blend, bpy):
     wall = _textured(bpy, "RedTex", img, diffuse=True)
     plane_object(bpy, "Wall", 4.0, (0, 2.0, 2.0), rotation=(np.pi / 2, 0, 0), material=wall)
     _sun(bpy, 3.0, rotation=(np.radians(50), 0, 0))  # travels towards +y: onto the floor and the wall's front
-    sc, r = _ours(bpy, ["Floor"], 32, photons=2_000_000, bounces=1)
-    ref = blender_scene.cycles_bake(empty_blend, ["Floor"], resolution=32, samples=256, bounces=1)
+    sc, r = _ours(bpy, ["Floor"], 64, photons=2_000_000, bounces=1)
+    ref = blender_scene.cycles_bake(empty_blend, ["Floor"], resolution=64, samples=256, bounces=1)
     assert sc.textures is not None and (sc.albedo_texture >= 0).any()
-    rows = np.arange(32)[:, None] * np.ones(32)[None, :]
-    near_wall = rows >= 26  # lightmap rows towards +y (the wall)
+    rows = np.arange(64)[:, None] * np.ones(64)[None, :]
+    near_wall = rows >= 52  # lightmap rows towards +y (the wall): the last 75 cm
     # Indirect only: subtract the direct part, which is the same grey in both.
     r0 = compute(sc, BakeSettings(photons=2_000, bounces=0))
-    ref0 = blender_scene.cycles_bake(empty_blend, ["Floor"], resolution=32, samples=64, bounces=0)
+    ref0 = blender_scene.cycles_bake(empty_blend, ["Floor"], resolution=64, samples=64, bounces=0)
     ours = r.images["Floor"] - r0.images["Floor"]
     theirs = ref["Floor"] - ref0["Floor"]
     m = r.centre_masks["Floor"] & near_wall
@@ -87,6 +87,7 @@ def test_a_red_textured_wall_tints_the_floor_as_in_cycles(empty_blend, bpy):
     g_r_cycles = theirs[m][:, 1].mean() / theirs[m][:, 0].mean()
     assert g_r_cycles < 0.2  # really red
     assert abs(g_r_ours - g_r_cycles) < 0.03
+    # The light rises steeply into the corner: 3-texel discs (6 cm texels) blur it by a few per cent.
     assert abs(ours[m][:, 0].mean() / theirs[m][:, 0].mean() - 1) < 0.06
 
 
