@@ -487,3 +487,28 @@ def test_export_keeps_the_last_render(empty_blend, bpy, tmp_path):
     pixels = [np.array(bpy.data.images.load(str(tmp_path / f"{n}.exr")).pixels[:]) for n in ("before", "after")]
     assert pixels[0].mean() > 0 and np.array_equal(*pixels)
     assert [i.name for i in bpy.data.images if i.type == "RENDER_RESULT"] == ["Render Result"]
+
+
+def test_faceless_and_flattened_meshes_get_no_lightmap_and_say_so(cornell, bpy):
+    """Baking every mesh skips one without faces and one a zero scale flattens, naming them in one
+    line; naming one of them is a clear error. A flattened box still stands in the light as a sheet."""
+    from detp_bake.errors import BakeError
+    loose = bpy.data.meshes.new("Loose")
+    loose.from_pydata([(0, 0, 0), (1, 0, 0)], [(0, 1)], [])
+    cornell.collection.objects.link(bpy.data.objects.new("Loose", loose))
+    flat = cornell.objects["ShortBox"].copy()
+    flat.data = flat.data.copy()
+    flat.name, flat.scale = "Flat", (1.0, 0.0, 1.0)
+    cornell.collection.objects.link(flat)
+    bpy.context.view_layer.update()
+    said = []
+    from detp_bake import blender_scene
+    sc = blender_scene.export_scene(cornell, None, None, None, 16, said.append)
+    assert {o.name for o in sc.objects if o.bake} == {"Floor", "Ceiling", "BackWall", "LeftWall", "RightWall",
+                                                      "ShortBox", "TallBox"}
+    line = next(m for m in said if m.startswith("no lightmap"))
+    assert "'Loose' (no faces" in line and "'Flat' (flattened by a zero scale)" in line
+    assert sc.object_named("Flat").triangle_count == 4  # the two faces the flattening keeps
+    for name, why in (("Loose", "no faces"), ("Flat", "zero scale")):
+        with pytest.raises(BakeError, match=f"'{name}' cannot get a lightmap: .*{why}"):
+            blender_scene.export_scene(cornell, None, [name], None, 16, said.append)

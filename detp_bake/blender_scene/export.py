@@ -27,6 +27,17 @@ def material_albedo_emission(mat) -> tuple[np.ndarray, np.ndarray]:
     return s.albedo, s.emission
 
 
+def _unbakeable(obj) -> str:
+    """Why a mesh object can have no lightmap ('' when it can): no faces, or flattened by a zero
+    scale (it still takes part in the light transport as what it is: nothing, or a flat sheet)."""
+    if len(obj.data.polygons) == 0:
+        return "no faces, only loose vertices or edges"
+    m = np.array(obj.matrix_world, float)[:3, :3]
+    if abs(np.linalg.det(m)) <= 1e-12 * max(np.abs(m).max(), 1e-30) ** 3:
+        return "flattened by a zero scale"
+    return ""
+
+
 def scene_bounces(bl_scene) -> int:
     """Cycles' Light Paths › Diffuse bounces, capped by Total bounces."""
     cycles = getattr(bl_scene, "cycles", None)
@@ -53,6 +64,11 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
     if objects is None:
         targets = [o for o in bl_scene.objects if o.type == "MESH" and o.name in rendered
                    and not holdout(o, view_layer)]
+        unbakeable = {o.name: why for o in targets for why in [_unbakeable(o)] if why}
+        if unbakeable:
+            said = ", ".join(f"'{n}' ({why})" for n, why in list(unbakeable.items())[:6])
+            log(f"no lightmap for {said}" + (f" and {len(unbakeable) - 6} more" if len(unbakeable) > 6 else ""))
+            targets = [o for o in targets if o.name not in unbakeable]
     else:
         targets = []
         for name in objects:
@@ -73,6 +89,9 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
             if holdout(obj, view_layer):
                 raise BakeError(f"object '{name}' is a holdout, which Cycles bakes black: turn Holdout off "
                                 "to bake it")
+            why = _unbakeable(obj)
+            if why:
+                raise BakeError(f"object '{name}' cannot get a lightmap: {why}")
             targets.append(obj)
     if not targets:
         raise BakeError(f"scene '{bl_scene.name}' has no rendered mesh object to bake")
