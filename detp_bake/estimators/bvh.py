@@ -42,7 +42,7 @@ class DiscTree:
     item_disc: np.ndarray  # (items + 1,) int64: first sorted disc of each item
     item_patch: np.ndarray  # (items,) int32: the item's patch, −1 for a loose disc
     patch_geo: np.ndarray  # (patches, patches.GEO) float64: lattice, normal, radius, tolerances
-    patch_site: np.ndarray  # (patches, SIDE²) int32: sorted disc at each lattice site, −1 for none
+    patch_site: np.ndarray  # (patches, SIDE²) int32: sorted disc at each lattice site (−1: none; see patches)
     clusters: np.ndarray  # (k,) int32: roots of the subtrees that are the units of parallel work
 
     @property

@@ -27,7 +27,7 @@ from .bvh import AXIS, CONE, HI, LO, build
 from .discs import crossing_weight, make_discs
 from .morton import segment_order
 from . import patches
-from .patches import SIDE, form_patches, group_keys, patch_splat
+from .patches import SIDE, form_patches, group_keys, mark_cut, patch_splat
 
 LEAF = 4  # discs per leaf
 PATCHES = True  # flat charts' texels as lattice patches (patches.py)
@@ -205,6 +205,7 @@ class DiscIndex(Estimator):
         t2 = time.perf_counter()
         self.tree, self.disc, steps = build(d.centre, d.normal, d.radius, d.slab, d.eps, LEAF,
                                             max(CLUSTER, len(d) // 4096), patch_of, site_of, geo, SIDE)
+        mark_cut(self.tree.patch_site, self.disc, self.tree.patch_geo)
         steps["patches"] = t2 - t1
         self.cluster_of = np.full(self.tree.nodes, -1, np.int32)
         self.cluster_of[self.tree.clusters] = np.arange(len(self.tree.clusters), dtype=np.int32)

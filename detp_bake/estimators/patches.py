@@ -19,7 +19,7 @@ import numpy as np
 
 from .discs import crossing_weight
 
-SIDE = 8  # lattice sites per patch row and column
+SIDE = 32  # lattice sites per patch row and column
 MIN_SITES = 12  # smaller groups stay loose discs
 LATTICE_TOL = 1e-6  # largest deviation from the fitted lattice, as a fraction of the site spacing
 NORMAL_TOL = 1e-9  # largest normal deviation from the patch's normal
@@ -69,9 +69,10 @@ def _dist(centre, d, c0, du, dv, i, j):
 
 
 @numba.njit(cache=True)
-def _grow(grid, free, centre, normal, radius, slab, seed, member, lattice_tol, normal_tol):
-    """Sites of the block on the seed's lattice (du, dv from its neighbours), with its radius, slab
-    and normal; False when the seed has no neighbour along a row and along a column."""
+def _grow(grid, free, centre, normal, radius, slab, seed, member, queue, lattice_tol, normal_tol):
+    """Flood-fill from the seed over free neighbouring sites on the seed's lattice (du, dv from its
+    neighbours) with its normal; returns how many (queue[:count]), 0 when the seed has no
+    neighbour along a row and along a column."""
     si, sj = seed % SIDE, seed // SIDE
     d0 = grid[seed]
     step = np.zeros((2, 3))
@@ -85,23 +86,77 @@ def _grow(grid, free, centre, normal, radius, slab, seed, member, lattice_tol, n
                 found = True
                 break
         if not found:
-            return False
+            return 0
     du, dv = step[0], step[1]
     spacing = min(np.sqrt((du * du).sum()), np.sqrt((dv * dv).sum()))
     c0 = np.empty(3)
     for c in range(3):
         c0[c] = centre[d0, c] - si * du[c] - sj * dv[c]
+    member[seed] = True
+    queue[0] = seed
+    head, tail = 0, 1
+    while head < tail:
+        s = queue[head]
+        head += 1
+        for k in range(4):
+            i = s % SIDE + (1 if k == 0 else (-1 if k == 1 else 0))
+            j = s // SIDE + (1 if k == 2 else (-1 if k == 3 else 0))
+            if not (0 <= i < SIDE and 0 <= j < SIDE):
+                continue
+            s2 = j * SIDE + i
+            d = grid[s2]
+            if not free[s2] or member[s2]:
+                continue
+            dn = 0.0
+            for c in range(3):
+                dn += (normal[d, c] - normal[d0, c]) ** 2
+            # Twice the tolerances: the seed itself deviates too.
+            if dn <= (2 * normal_tol) ** 2 and _dist(centre, d, c0, du, dv, i, j) <= 2 * lattice_tol * spacing:
+                member[s2] = True
+                queue[tail] = s2
+                tail += 1
+    return tail
+
+
+@numba.njit(cache=True)
+def _accept(grid, member, centre, normal, radius, slab, lattice_tol, normal_tol, geo, p):
+    """Fit the lattice to the member sites and check it; when it holds, write patch p's geometry
+    into geo[p] and return True."""
+    ok, c0, du, dv = _fit(grid, member, centre)
+    if not ok:
+        return False
+    nm = np.zeros(3)
+    r = sl = 0.0
     for s in range(SIDE * SIDE):
-        member[s] = False
-        d = grid[s]
-        if not free[s] or radius[d] != radius[d0] or slab[d] != slab[d0]:
-            continue
-        dn = 0.0
-        for c in range(3):
-            dn += (normal[d, c] - normal[d0, c]) ** 2
-        off = _dist(centre, d, c0, du, dv, s % SIDE, s // SIDE)
-        if dn <= (2 * normal_tol) ** 2 and off <= 2 * lattice_tol * spacing:  # twice: the seed deviates too
-            member[s] = True
+        if member[s]:
+            nm += normal[grid[s]]
+            r, sl = max(r, radius[grid[s]]), max(sl, slab[grid[s]])
+    nm /= np.sqrt((nm * nm).sum())
+    res = 0.0
+    tol_n = 0.0
+    tol_h = 0.0
+    lo_i, hi_i, lo_j, hi_j = SIDE, -1, SIDE, -1
+    for s in range(SIDE * SIDE):
+        if member[s]:
+            d = grid[s]
+            res = max(res, _dist(centre, d, c0, du, dv, s % SIDE, s // SIDE))
+            tol_n = max(tol_n, np.sqrt(((normal[d] - nm) ** 2).sum()))
+            tol_h = max(tol_h, abs(((centre[d] - c0) * nm).sum()))  # off the plane
+            lo_i, hi_i = min(lo_i, s % SIDE), max(hi_i, s % SIDE)
+            lo_j, hi_j = min(lo_j, s // SIDE), max(hi_j, s // SIDE)
+    uu, uv, vv = (du * du).sum(), (du * dv).sum(), (dv * dv).sum()
+    # Sites further apart than the diameter (stretched charts) gain nothing from runs and would
+    # make a long box that many segments enter.
+    if not (res <= lattice_tol * np.sqrt(min(uu, vv)) and tol_n <= normal_tol and max(uu, vv) <= 4 * r * r):
+        return False
+    det = uu * vv - uv * uv
+    geo[p, C0:C0 + 3], geo[p, DU:DU + 3], geo[p, DV:DV + 3], geo[p, NRM:NRM + 3] = c0, du, dv, nm
+    geo[p, RAD], geo[p, SLAB], geo[p, INV_AREA] = r, sl, 1.0 / (np.pi * (r * r))
+    geo[p, TOL_C], geo[p, TOL_N], geo[p, TOL_H] = res, tol_n, tol_h * (1.0 + 1e-9) + 1e-15
+    geo[p, DIAM] = (SIDE - 1) * (np.sqrt(uu) + np.sqrt(vv)) + res
+    geo[p, UU] = uu
+    geo[p, GINV], geo[p, GINV + 1], geo[p, GINV + 2] = vv / det, -uv / det, uu / det
+    geo[p, RECT], geo[p, RECT + 1], geo[p, RECT + 2], geo[p, RECT + 3] = lo_i, hi_i, lo_j, hi_j
     return True
 
 
@@ -110,8 +165,7 @@ def form_patches(keys_sorted, order, li, lj, centre, normal, radius, slab, latti
     """Patches from discs grouped by block (`order` sorts them by key; li, lj: pixel within the
     block). A block holds one patch per chart lattice found in it (grown from a seed texel, then
     fitted and checked against the tolerances); texels off every lattice (chart borders) and discs
-    cut short stay loose.
-    Returns per disc its patch (−1: loose) and site, and the patches' geometry."""
+    cut short stay loose. Returns per disc its patch (−1: loose) and site, and the patches' geometry."""
     n = order.shape[0]
     patch_of = np.full(n, -1, np.int64)
     site_of = np.full(n, -1, np.int64)
@@ -120,6 +174,8 @@ def form_patches(keys_sorted, order, li, lj, centre, normal, radius, slab, latti
     grid = np.full(SIDE * SIDE, -1, np.int64)
     free = np.zeros(SIDE * SIDE, np.bool_)
     member = np.zeros(SIDE * SIDE, np.bool_)
+    queue = np.empty(SIDE * SIDE, np.int64)
+    seedable = np.zeros(SIDE * SIDE, np.bool_)
     a = 0
     while a < n:
         b = a
@@ -132,66 +188,22 @@ def form_patches(keys_sorted, order, li, lj, centre, normal, radius, slab, latti
             grid[s] = order[q]
             free[s] = True
         a = b
+        seedable[:] = free
         for seed in range(SIDE * SIDE):
-            if not free[seed] or not _grow(grid, free, centre, normal, radius, slab, seed, member, lattice_tol,
-                                           normal_tol):
+            if not seedable[seed]:
                 continue
-            k = 0
-            for s in range(SIDE * SIDE):
-                k += member[s]
-            if k < MIN_SITES:
-                continue
-            ok, c0, du, dv = _fit(grid, member, centre)
-            if not ok:
-                continue
-            nm = np.zeros(3)
-            for s in range(SIDE * SIDE):
-                if member[s]:
-                    nm += normal[grid[s]]
-            nm /= np.sqrt((nm * nm).sum())
-            res = 0.0
-            tol_n = 0.0
-            for s in range(SIDE * SIDE):
-                if member[s]:
-                    d = grid[s]
-                    res = max(res, _dist(centre, d, c0, du, dv, s % SIDE, s // SIDE))
-                    tol_n = max(tol_n, np.sqrt(((normal[d] - nm) ** 2).sum()))
-            spacing = min(np.sqrt((du * du).sum()), np.sqrt((dv * dv).sum()))
-            widest = max(np.sqrt((du * du).sum()), np.sqrt((dv * dv).sum()))
-            # Sites further apart than the radius (stretched charts) gain nothing from runs and
-            # would make a long box that many segments enter.
-            if not (res <= lattice_tol * spacing and tol_n <= normal_tol and widest <= radius[grid[seed]]):
-                continue
-            p = count
-            count += 1
-            d0 = grid[seed]
-            r = radius[d0]
-            tol_c = res
-            tol_h = 0.0
-            for s in range(SIDE * SIDE):
-                if member[s]:
-                    h = 0.0
-                    for c in range(3):
-                        h += (centre[grid[s], c] - c0[c]) * nm[c]
-                    tol_h = max(tol_h, abs(h))
-            geo[p, C0:C0 + 3], geo[p, DU:DU + 3], geo[p, DV:DV + 3], geo[p, NRM:NRM + 3] = c0, du, dv, nm
-            geo[p, RAD], geo[p, SLAB], geo[p, INV_AREA] = r, slab[d0], 1.0 / (np.pi * (r * r))
-            geo[p, TOL_C], geo[p, TOL_N], geo[p, TOL_H] = tol_c, tol_n, tol_h * (1.0 + 1e-9) + 1e-15
-            geo[p, DIAM] = (SIDE - 1) * (np.sqrt((du * du).sum()) + np.sqrt((dv * dv).sum())) + tol_c
-            uu, uv, vv = (du * du).sum(), (du * dv).sum(), (dv * dv).sum()
-            det = uu * vv - uv * uv
-            geo[p, UU] = uu
-            geo[p, GINV], geo[p, GINV + 1], geo[p, GINV + 2] = vv / det, -uv / det, uu / det
-            geo[p, RECT], geo[p, RECT + 2] = SIDE, SIDE
-            geo[p, RECT + 1] = geo[p, RECT + 3] = -1
-            for s in range(SIDE * SIDE):
-                if member[s]:
-                    geo[p, RECT], geo[p, RECT + 1] = min(geo[p, RECT], s % SIDE), max(geo[p, RECT + 1], s % SIDE)
-                    geo[p, RECT + 2] = min(geo[p, RECT + 2], s // SIDE)
-                    geo[p, RECT + 3] = max(geo[p, RECT + 3], s // SIDE)
-                    patch_of[grid[s]] = p
+            k = _grow(grid, free, centre, normal, radius, slab, seed, member, queue, lattice_tol, normal_tol)
+            ok = k >= MIN_SITES and _accept(grid, member, centre, normal, radius, slab, lattice_tol, normal_tol,
+                                            geo, count)
+            for q in range(k):
+                s = queue[q]
+                member[s] = False
+                seedable[s] = False  # another seed on the same lattice would be turned down too
+                if ok:
+                    patch_of[grid[s]] = count
                     site_of[grid[s]] = s
                     free[s] = False
+            count += ok
     return patch_of, site_of, geo[:count].copy()
 
 
@@ -209,9 +221,9 @@ def patch_splat(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc):
     hits = 0
     for s in range(SIDE * SIDE):
         d = site[p, s]
-        if d >= 0:
+        if d != -1:
             tests += 1
-            hits += _add(d, disc, o, w, length, flux, i, eps, kernel, acc)
+            hits += _add(d if d >= 0 else -d - 2, disc, o, w, length, flux, i, eps, kernel, acc)
     return tests, hits
 
 
@@ -316,9 +328,12 @@ def _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, px, py, p
             in_hi = int(np.floor(centre + half_in - 1e-9))
         for il in range(lo, hi + 1):
             d = site[p, jl * SIDE + il]
-            if d < 0:
+            if d == -1:
                 continue
-            if in_lo <= il <= in_hi:
+            if d < -1:  # a disc cut short: the certain run does not hold for it
+                tests += 1
+                hits += _add(-d - 2, disc, o, w, length, flux, i, eps, kernel, acc)
+            elif in_lo <= il <= in_hi:
                 hits += 1
                 acc[d, 0] += k_in * f0
                 acc[d, 1] += k_in * f1
@@ -327,3 +342,14 @@ def _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, px, py, p
                 tests += 1
                 hits += _add(d, disc, o, w, length, flux, i, eps, kernel, acc)
     return tests, hits
+
+
+@numba.njit(cache=True)
+def mark_cut(site, disc, geo):
+    """Sites whose disc is smaller than the patch's (cut short by tangent clearance) become
+    −(disc + 2): they are always tested one by one."""
+    for p in range(site.shape[0]):
+        for s in range(site.shape[1]):
+            d = site[p, s]
+            if d >= 0 and (disc[6, d] != geo[p, RAD] or disc[7, d] != geo[p, SLAB]):
+                site[p, s] = -d - 2
