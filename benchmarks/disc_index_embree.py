@@ -195,9 +195,18 @@ def run(method, texels, batches, settings, scene_radius):
     if method.startswith("embree"):
         est = EmbreeDiscs(texels, settings, scene_radius, layered=method == "embree_rule_a")
     else:
-        est = create("disc_index", texels, settings, context=Context(scene_radius=scene_radius))
+        from detp_bake.estimators import disc_index as di
+        make = di.make_discs
         if method == "disc_index_rule_a":
-            est.discs.slab[:] = -1.0  # switches rule (b) off in crossing_weight; the BVH stays a superset
+            def rule_a(*args, **kwargs):  # slab −1 switches rule (b) off in crossing_weight
+                d = make(*args, **kwargs)
+                d.slab[:] = -1.0
+                return d
+            di.make_discs = rule_a
+        try:
+            est = create("disc_index", texels, settings, context=Context(scene_radius=scene_radius))
+        finally:
+            di.make_discs = make
     t0 = time.perf_counter()
     for b in batches:
         est.add(b)
@@ -205,7 +214,7 @@ def run(method, texels, batches, settings, scene_radius):
     tq = time.perf_counter() - t0
     if method.startswith("embree"):
         return r, est.crossings, est.seconds_build, tq, {"layers": len(est.layers), "rays": est.rays}
-    return r.irradiance, r.counters["crossings"], est.seconds_build, tq, {}
+    return r.irradiance, r.counters["crossings"], r.counters["seconds_build"], tq, {}
 
 
 def workload(name, texels, batches, settings, scene_radius, oracle_n, repeat=1, methods=METHODS):

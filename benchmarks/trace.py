@@ -38,19 +38,19 @@ RESULTS = Path(__file__).resolve().parent / "results" / "trace.json"
 def record_rays(scene, photons: int, threads: int, seed: int):
     """Trace once, keeping a float32 copy of each batch of rays the tracer sends to Embree."""
     calls = []
-    original = RayCaster.intersect
+    original = RayCaster.hits  # the tracer's one call into Embree
 
     def hooked(self, origins, dirs, *args, **kwargs):
         calls.append((np.array(origins, np.float32), np.array(dirs, np.float32)))
         return original(self, origins, dirs, *args, **kwargs)
 
-    RayCaster.intersect = hooked
+    RayCaster.hits = hooked
     try:
         tracer = PhotonTracer(scene, photons, scene.default_bounces, seed, threads=threads)
         for _ in tracer.batches():
             pass
     finally:
-        RayCaster.intersect = original
+        RayCaster.hits = original
     return calls, tracer.stats
 
 
