@@ -96,7 +96,8 @@ def test_same_estimate_on_any_thread_count_and_when_binning_overflows(monkeypatc
         numba.set_num_threads(before)
     assert np.array_equal(one.irradiance, many.irradiance)
     # Small clusters and bins of one pair per segment: many clusters, and every chunk overflows once.
-    monkeypatch.setattr(disc_index, "CLUSTER", 16)
+    monkeypatch.setattr(disc_index, "MIN_CLUSTER", 16)
+    monkeypatch.setattr(disc_index, "CLUSTERS_PER_THREAD", 1000)
     monkeypatch.setattr(disc_index, "BIN_CHUNK", 64)
     est = create("disc_index", texels, EstimatorSettings(radius=0.08), context=Context(scene_radius=3.0))
     est.bin_slots = 1

@@ -31,7 +31,8 @@ from .patches import SIDE, form_patches, group_keys, mark_cut, patch_splat
 
 LEAF = 4  # discs per leaf
 PATCHES = True  # flat charts' texels as lattice patches (patches.py)
-CLUSTER = 1 << 14  # discs per unit of parallel work: fewer means more binning, more means worse balance
+CLUSTERS_PER_THREAD = 16  # units of parallel work: more means more binning, fewer means worse balance
+MIN_CLUSTER = 4096  # discs
 BIN_CHUNK = 1 << 12  # segments per binning task
 STACK = 256  # deeper than any tree over 63-bit codes
 ORDER_AT = 1.0  # segments are walked in Z-order of this point along them (0.5: midpoint, 1: end)
@@ -203,8 +204,9 @@ class DiscIndex(Estimator):
                                                   (j % SIDE).astype(np.float64), d.centre, d.normal, d.radius, d.slab,
                                                   patches.LATTICE_TOL, patches.NORMAL_TOL)
         t2 = time.perf_counter()
-        self.tree, self.disc, steps = build(d.centre, d.normal, d.radius, d.slab, d.eps, LEAF,
-                                            max(CLUSTER, len(d) // 4096), patch_of, site_of, geo, SIDE)
+        cluster = max(MIN_CLUSTER, len(d) // (CLUSTERS_PER_THREAD * numba.get_num_threads()))
+        self.tree, self.disc, steps = build(d.centre, d.normal, d.radius, d.slab, d.eps, LEAF, cluster, patch_of,
+                                            site_of, geo, SIDE)
         mark_cut(self.tree.patch_site, self.disc, self.tree.patch_geo)
         steps["patches"] = t2 - t1
         self.cluster_of = np.full(self.tree.nodes, -1, np.int32)
