@@ -1,19 +1,20 @@
 """DETP by disc indexing (García et al. 2005): index the discs, then walk every segment through the
 index from its origin to its end, adding its flux to each disc it crosses.
 
-The index is a BVH over the discs' cylinders (bvh.py: Morton-order radix splits, float32 boxes,
-normal cones), built once; photons then stream through it batch by batch, so memory does not grow
-with the photon count. A batch goes in three steps:
-  1. segments are sorted in Z-order of their midpoints, so consecutive walks share nodes and discs;
-  2. binning: each segment walks the top of the tree and is listed under every cluster (a subtree
-     of a few thousand discs) whose box it enters, in segment order;
+The index is a BVH (bvh.py: Morton-order radix splits, float32 boxes, normal cones) over items:
+loose discs, and lattice patches (patches.py), the 32x32 blocks of a flat chart's texels, where a
+segment's crossings are found a lattice row at a time instead of disc by disc. It is built once;
+photons then stream through it batch by batch, so memory does not grow with the photon count.
+A batch goes in three steps:
+  1. segments are sorted in Z-order of their ends, where most crossings are, so consecutive walks
+     share nodes and discs;
+  2. binning: each segment walks the top of the tree and is listed under every cluster (a subtree,
+     one of some 16 per thread) whose box it enters, in segment order;
   3. splatting: threads take clusters, largest list first, and walk each listed segment through
      the cluster's subtree.
 Every disc belongs to one cluster and sums its segments in batch order, so the estimate is the
-same, bit for bit, on any number of threads, and one accumulator serves all threads.
-Measured against Embree scenes of disc quads (benchmarks/disc_index_embree.py), the compiled
-index is faster, so it is the one in the product; benchmarks/estimators.py --profile has its
-counters and seconds per step.
+same, bit for bit, on any number of threads and with or without patches, and one accumulator
+serves all threads. benchmarks/estimators.py --profile has the counters and seconds per step.
 """
 from __future__ import annotations
 
@@ -22,11 +23,10 @@ import time
 import numba
 import numpy as np
 
-from . import Estimate, Estimator, register
+from . import Estimate, Estimator, patches, register
 from .bvh import AXIS, CONE, HI, LO, build
 from .discs import crossing_weight, make_discs
 from .morton import segment_order
-from . import patches
 from .patches import SIDE, form_patches, group_keys, mark_cut, patch_splat
 
 LEAF = 4  # discs per leaf
