@@ -6,8 +6,8 @@ run, against a converged Cycles reference on the same texels.
                                  [--references-only] [--out DIR] [--figures DIR]
 
 Methods (each bakes every mesh of the scene at the configuration's resolution):
-- `cycles`: Cycles' Diffuse bake (DIRECT+INDIRECT, no COLOR, adaptive sampling off, default pixel
-  filter), a ladder of sample counts (`blender_scene.cycles_bake`, in this process);
+- `cycles`: Cycles' Diffuse bake (DIRECT+INDIRECT, no COLOR, adaptive sampling off), a ladder of
+  sample counts (`blender_scene.cycles_bake`, in this process);
 - `cycles+oidn`: the same bakes, each lightmap then denoised by OIDN's RT filter in HDR mode
   (`denoise.denoise_lightmap(filter="RT")` on the texels Cycles baked: the gutter filled first,
   a white albedo guide): the library and filter Blender's compositor Denoise node runs. Its
@@ -71,21 +71,22 @@ CONFIGS = {
                   estimators=["disc_index", "photon_map"], extra_photons=[10_000, 30_000],
                   old_mode=["disc_index"], old_mode_max=30_000, sweep_photons=[10_000, 30_000],
                   radius_texels=[1.5, 3.0], direct_samples=[4, 16], scene_resolution={},
-                  scene_reference_spp={}),
+                  scene_reference_spp={}, scene_spp={}),
     # sphere_cache finds exactly disc_index's crossings (same lightmaps, 5-7x the time): full only.
     "short": dict(resolution=64, reference_spp=2048, spp=[2, 4, 8, 16, 32, 64, 128, 256],
-                  photons=[125_000, 250_000, 500_000, 1_000_000, 2_000_000, 4_000_000, 8_000_000],
+                  photons=[62_500, 125_000, 250_000, 500_000, 1_000_000, 2_000_000, 4_000_000, 8_000_000],
                   estimators=["disc_index", "photon_map"], extra_photons=[250_000, 1_000_000, 4_000_000],
                   old_mode=["disc_index"], old_mode_max=4_000_000, sweep_photons=[250_000, 1_000_000, 4_000_000],
                   radius_texels=[1.0, 1.5, 2.0, 3.0, 4.0], direct_samples=[4, 8, 16, 32],
-                  scene_resolution={}, scene_reference_spp={"window_room": 4096}),
+                  scene_resolution={}, scene_reference_spp={"window_room": 4096},
+                  scene_spp={"window_room": [2, 4, 8, 16, 32, 64, 128, 256, 512]}),
     "full": dict(resolution=128, reference_spp=4096, spp=[2, 4, 8, 16, 32, 64, 128, 256, 512, 1024],
                  photons=[250_000, 500_000, 1_000_000, 2_000_000, 4_000_000, 8_000_000, 16_000_000],
                  estimators=["disc_index", "sphere_cache", "photon_map"],
                  extra_photons=[500_000, 2_000_000, 8_000_000], old_mode=["disc_index", "sphere_cache", "photon_map"],
                  old_mode_max=16_000_000, sweep_photons=[500_000, 2_000_000, 8_000_000],
                  radius_texels=[1.0, 1.5, 2.0, 3.0, 4.0, 6.0], direct_samples=[2, 4, 8, 16, 32, 64],
-                 scene_resolution={}, scene_reference_spp={"window_room": 16384}),
+                 scene_resolution={}, scene_reference_spp={"window_room": 16384}, scene_spp={}),
 }
 LABELS = {
     "cycles": "Cycles bake, raw",
@@ -128,6 +129,9 @@ def timed(fn):
 
 
 def cycles(bpy, blender_scene, names, resolution, spp, seed):
+    # Cycles' bake jitters its sample points uniformly over the texel, whatever the film's pixel
+    # filter (measured: a 1-px box and the default 1.5-px Blackman-Harris bake the same bytes):
+    # the same footprint as ours, the texel's covered square.
     with quiet_stdout():
         return blender_scene.cycles_bake(bpy.context.scene, names, resolution=resolution, samples=spp, seed=seed)
 
@@ -195,9 +199,11 @@ def denoise_all(images, masks, filter_):
 
 
 def for_scene(cfg, label_):
-    """The configuration with this scene's resolution (`res`) and reference samples (`ref_spp`)."""
+    """The configuration with this scene's resolution (`res`), reference samples (`ref_spp`) and
+    Cycles ladder (`spp`)."""
     return dict(cfg, res=cfg["scene_resolution"].get(label_, cfg["resolution"]),
-                ref_spp=cfg["scene_reference_spp"].get(label_, cfg["reference_spp"]))
+                ref_spp=cfg["scene_reference_spp"].get(label_, cfg["reference_spp"]),
+                spp=cfg["scene_spp"].get(label_, cfg["spp"]))
 
 
 def ours_settings(cfg, name, **kw):
@@ -227,9 +233,11 @@ def bench_scene(label_, cfg, cache, log):
 
     rows = []
 
-    def record(method, cost, wall, cpu, images):
+    def record(method, cost, wall, cpu, images, phases=None):
         row = {"method": method, **cost, "seconds": wall, "cpu_seconds": cpu, "load": os.getloadavg()[0],
                **error(images, ref, masks, sigma)}
+        if phases:
+            row["phases"] = {k: round(v, 4) for k, v in phases.items()}
         rows.append(row)
         what = f"{cost['samples']:>9,} spp" if "samples" in cost else f"{cost['photons']:>9,} ph."
         cpu_text = "" if cpu is None else f" (CPU {cpu:7.2f} s)"
@@ -251,9 +259,9 @@ def bench_scene(label_, cfg, cache, log):
         if old_mode:
             r, wall, cpu = timed(lambda: compute(scene, ours_settings(cfg, name, photons=photons, direct="photons",
                                                                      denoise=False)))
-            return record(f"{name}/photons", {"photons": photons}, wall, cpu, r.images) <= STOP
+            return record(f"{name}/photons", {"photons": photons}, wall, cpu, r.images, r.seconds) <= STOP
         r, wall, cpu = timed(lambda: compute(scene, ours_settings(cfg, name, photons=photons)))
-        done = record(name, {"photons": photons}, wall, cpu, r.images) <= STOP
+        done = record(name, {"photons": photons}, wall, cpu, r.images, r.seconds) <= STOP
         d = r.seconds.get("denoise", 0.0)  # the same bake without its last step
         record(f"{name}/no-denoise", {"photons": photons}, wall - d, None, r.raw_images or r.images)
         return done
@@ -303,6 +311,10 @@ def sweep_scene(label_, cfg, cache, log):
     names = [o.name for o in scene.objects]
     ref, halves, _ = reference(bpy, blender_scene, label_, names, res, cfg["ref_spp"], cache, log)
     base = BakeSettings()
+    if base.estimator_settings.radius_texels is None:  # the bake picks the radius by direct mode
+        from detp_bake import estimators
+        wide = getattr(estimators, "RADIUS_TEXELS_INDIRECT" if base.direct == "sampled" else "RADIUS_TEXELS_ALL")
+        base = replace(base, estimator_settings=replace(base.estimator_settings, radius_texels=wide))
     warm = compute(scene, ours_settings(cfg, base.estimator, photons=2000))
     masks = warm.centre_masks
     sigma = reference_noise(halves, masks)
@@ -542,7 +554,7 @@ def main(argv=None):
     group = ap.add_mutually_exclusive_group()
     group.add_argument("--quick", action="store_true", help="seconds: checks that the script works")
     group.add_argument("--full", action="store_true", help="the full sweeps (hours on 2 cores)")
-    ap.add_argument("--scenes", default="cornell_box,l_room,window_room,patio")
+    ap.add_argument("--scenes", default="cornell_box,l_room,window_room,patio", help="comma-separated, or none")
     ap.add_argument("--sweep-scene", default="l_room", help="scene for the radius/shadow-ray sweeps, or none")
     ap.add_argument("--estimators", default=None, help="comma-separated subset of the configuration's estimators")
     ap.add_argument("--references-only", action="store_true",
@@ -577,9 +589,10 @@ def main(argv=None):
             _, _, seconds = reference(bpy, blender_scene, label_, names, c["res"], c["ref_spp"], out / "cache", log)
             log(f"{label_}: reference " + ("cached already" if seconds is None else f"baked in {seconds:.0f} s"))
         return 0
-    check = compositor_check(args.scenes.split(",")[0], cfg, log) if args.compositor_check else None
+    first = args.sweep_scene if args.scenes == "none" else args.scenes.split(",")[0]
+    check = compositor_check(first, cfg, log) if args.compositor_check else None
     results, sweeps = [], []
-    for label_ in args.scenes.split(","):
+    for label_ in [] if args.scenes == "none" else args.scenes.split(","):
         res = bench_scene(label_, cfg, out / "cache", log)
         res["plot"] = plot(res, dirs)
         results.append(res)
