@@ -31,7 +31,7 @@ from .patches import SIDE, form_patches, group_keys, mark_cut, patch_splat
 
 LEAF = 4  # discs per leaf
 PATCHES = True  # flat charts' texels as lattice patches (patches.py)
-CLUSTERS_PER_THREAD = 16  # units of parallel work: more means more binning, fewer means worse balance
+CLUSTERS_PER_THREAD = 4  # units of parallel work: more means more binning, fewer means worse balance
 MIN_CLUSTER = 4096  # discs
 BIN_CHUNK = 1 << 12  # segments per binning task
 STACK = 256  # deeper than any tree over 63-bit codes

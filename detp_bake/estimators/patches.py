@@ -129,9 +129,11 @@ def _accept(grid, member, centre, normal, radius, slab, lattice_tol, normal_tol,
     r = sl = 0.0
     for s in range(SIDE * SIDE):
         if member[s]:
-            nm += normal[grid[s]]
-            r, sl = max(r, radius[grid[s]]), max(sl, slab[grid[s]])
-    nm /= np.sqrt((nm * nm).sum())
+            d = grid[s]
+            for c in range(3):
+                nm[c] += normal[d, c]
+            r, sl = max(r, radius[d]), max(sl, slab[d])
+    nm /= np.sqrt(nm[0] ** 2 + nm[1] ** 2 + nm[2] ** 2)
     res = 0.0
     tol_n = 0.0
     tol_h = 0.0
@@ -140,11 +142,17 @@ def _accept(grid, member, centre, normal, radius, slab, lattice_tol, normal_tol,
         if member[s]:
             d = grid[s]
             res = max(res, _dist(centre, d, c0, du, dv, s % SIDE, s // SIDE))
-            tol_n = max(tol_n, np.sqrt(((normal[d] - nm) ** 2).sum()))
-            tol_h = max(tol_h, abs(((centre[d] - c0) * nm).sum()))  # off the plane
+            dn = h = 0.0
+            for c in range(3):
+                dn += (normal[d, c] - nm[c]) ** 2
+                h += (centre[d, c] - c0[c]) * nm[c]
+            tol_n = max(tol_n, np.sqrt(dn))
+            tol_h = max(tol_h, abs(h))  # off the plane
             lo_i, hi_i = min(lo_i, s % SIDE), max(hi_i, s % SIDE)
             lo_j, hi_j = min(lo_j, s // SIDE), max(hi_j, s // SIDE)
-    uu, uv, vv = (du * du).sum(), (du * dv).sum(), (dv * dv).sum()
+    uu = du[0] * du[0] + du[1] * du[1] + du[2] * du[2]
+    uv = du[0] * dv[0] + du[1] * dv[1] + du[2] * dv[2]
+    vv = dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2]
     # Sites further apart than the diameter (stretched charts) gain nothing from runs and would
     # make a long box that many segments enter.
     if not (res <= lattice_tol * np.sqrt(min(uu, vv)) and tol_n <= normal_tol and max(uu, vv) <= 4 * r * r):
@@ -160,51 +168,71 @@ def _accept(grid, member, centre, normal, radius, slab, lattice_tol, normal_tol,
     return True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def form_patches(keys_sorted, order, li, lj, centre, normal, radius, slab, lattice_tol, normal_tol):
     """Patches from discs grouped by block (`order` sorts them by key; li, lj: pixel within the
     block). A block holds one patch per chart lattice found in it (grown from a seed texel, then
-    fitted and checked against the tolerances); texels off every lattice (chart borders) and discs
-    cut short stay loose. Returns per disc its patch (−1: loose) and site, and the patches' geometry."""
+    fitted and checked against the tolerances); texels off every lattice (chart borders) stay
+    loose. Blocks are independent: threads take them, and patches are numbered in block order.
+    Returns per disc its patch (−1: loose) and site, and the patches' geometry."""
     n = order.shape[0]
-    patch_of = np.full(n, -1, np.int64)
+    blocks = 0
+    for q in range(n):
+        blocks += q == 0 or keys_sorted[q] != keys_sorted[q - 1]
+    start = np.empty(blocks + 1, np.int64)
+    k = 0
+    for q in range(n):
+        if q == 0 or keys_sorted[q] != keys_sorted[q - 1]:
+            start[k] = q
+            k += 1
+    start[blocks] = n
+    local = np.full(n, -1, np.int64)  # patch within its block
     site_of = np.full(n, -1, np.int64)
-    geo = np.zeros((n // MIN_SITES + 1, GEO))
-    count = 0
-    grid = np.full(SIDE * SIDE, -1, np.int64)
-    free = np.zeros(SIDE * SIDE, np.bool_)
-    member = np.zeros(SIDE * SIDE, np.bool_)
-    queue = np.empty(SIDE * SIDE, np.int64)
-    seedable = np.zeros(SIDE * SIDE, np.bool_)
-    a = 0
-    while a < n:
-        b = a
-        while b < n and keys_sorted[b] == keys_sorted[a]:
-            b += 1
-        grid[:] = -1
-        free[:] = False
+    # A block of m discs makes at most m // MIN_SITES patches: its rows of `slots` start at a // MIN_SITES.
+    slots = np.zeros((n // MIN_SITES + 1, GEO))
+    made = np.zeros(blocks, np.int64)
+    for blk in numba.prange(blocks):
+        a, b = start[blk], start[blk + 1]
+        grid = np.full(SIDE * SIDE, -1, np.int64)
+        free = np.zeros(SIDE * SIDE, np.bool_)
+        member = np.zeros(SIDE * SIDE, np.bool_)
+        queue = np.empty(SIDE * SIDE, np.int64)
         for q in range(a, b):
             s = int(lj[order[q]]) * SIDE + int(li[order[q]])
             grid[s] = order[q]
             free[s] = True
-        a = b
-        seedable[:] = free
+        seedable = free.copy()
+        count = 0
         for seed in range(SIDE * SIDE):
             if not seedable[seed]:
                 continue
             k = _grow(grid, free, centre, normal, radius, slab, seed, member, queue, lattice_tol, normal_tol)
             ok = k >= MIN_SITES and _accept(grid, member, centre, normal, radius, slab, lattice_tol, normal_tol,
-                                            geo, count)
+                                            slots, a // MIN_SITES + count)
             for q in range(k):
                 s = queue[q]
                 member[s] = False
                 seedable[s] = False  # another seed on the same lattice would be turned down too
                 if ok:
-                    patch_of[grid[s]] = count
+                    local[grid[s]] = count
                     site_of[grid[s]] = s
                     free[s] = False
             count += ok
-    return patch_of, site_of, geo[:count].copy()
+        made[blk] = count
+    first = np.zeros(blocks + 1, np.int64)
+    for blk in range(blocks):
+        first[blk + 1] = first[blk] + made[blk]
+    geo = np.empty((first[blocks], GEO))
+    patch_of = np.full(n, -1, np.int64)
+    for blk in numba.prange(blocks):
+        a = start[blk]
+        for k in range(made[blk]):
+            geo[first[blk] + k] = slots[a // MIN_SITES + k]
+        for q in range(a, start[blk + 1]):
+            d = order[q]
+            if local[d] >= 0:
+                patch_of[d] = first[blk] + local[d]
+    return patch_of, site_of, geo
 
 
 @numba.njit(cache=True, inline="always")
