@@ -24,10 +24,11 @@ MIN_SITES = 12  # smaller groups stay loose discs
 LATTICE_TOL = 1e-6  # largest deviation from the fitted lattice, as a fraction of the site spacing
 NORMAL_TOL = 1e-9  # largest normal deviation from the patch's normal
 # Columns of `geo`, one row per patch.
-C0, DU, DV, NRM, RAD, SLAB, INV_AREA, TOL_C, TOL_N, DIAM, UU = 0, 3, 6, 9, 12, 13, 14, 15, 16, 17, 18
+C0, DU, DV, NRM, RAD, SLAB, INV_AREA, TOL_C, TOL_N, DIAM, INV_UU = 0, 3, 6, 9, 12, 13, 14, 15, 16, 17, 18
 GINV, RECT = 19, 22  # inverse Gram matrix of (du, dv): g00, g01, g11; occupied sites: i0, i1, j0, j1
 TOL_H = 26  # largest |(c − c0)·n| over the sites: how far they stand off the patch's plane
-GEO = 27
+SKEW, SCHUR = 27, 28  # (du·dv)/|du|², |dv|² − (du·dv)²/|du|²: a row's circle, see _rows
+GEO = 29
 
 
 def group_keys(lightmap: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
@@ -162,7 +163,8 @@ def _accept(grid, member, centre, normal, radius, slab, lattice_tol, normal_tol,
     geo[p, RAD], geo[p, SLAB], geo[p, INV_AREA] = r, sl, 1.0 / (np.pi * (r * r))
     geo[p, TOL_C], geo[p, TOL_N], geo[p, TOL_H] = res, tol_n, tol_h * (1.0 + 1e-9) + 1e-15
     geo[p, DIAM] = (SIDE - 1) * (np.sqrt(uu) + np.sqrt(vv)) + res
-    geo[p, UU] = uu
+    geo[p, INV_UU] = 1.0 / uu
+    geo[p, SKEW], geo[p, SCHUR] = uv / uu, vv - uv * uv / uu
     geo[p, GINV], geo[p, GINV + 1], geo[p, GINV + 2] = vv / det, -uv / det, uu / det
     geo[p, RECT], geo[p, RECT + 1], geo[p, RECT + 2], geo[p, RECT + 3] = lo_i, hi_i, lo_j, hi_j
     return True
@@ -321,12 +323,10 @@ def _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, px, py, p
     if r_in <= 0.0:
         r_in = 0.0
     qx, qy, qz = px - geo[p, C0], py - geo[p, C0 + 1], pz - geo[p, C0 + 2]
-    ux, uy, uz = geo[p, DU], geo[p, DU + 1], geo[p, DU + 2]
-    vx, vy, vz = geo[p, DV], geo[p, DV + 1], geo[p, DV + 2]
-    uu = geo[p, UU]
-    # The point in lattice coordinates and the circle's reach along them: only rows and columns
-    # of occupied sites within that reach can hold a crossed disc.
-    qu, qv = qx * ux + qy * uy + qz * uz, qx * vx + qy * vy + qz * vz
+    # The point in lattice coordinates (si, sj) and the circle's reach along them: only rows and
+    # columns of occupied sites within that reach can hold a crossed disc.
+    qu = qx * geo[p, DU] + qy * geo[p, DU + 1] + qz * geo[p, DU + 2]
+    qv = qx * geo[p, DV] + qy * geo[p, DV + 1] + qz * geo[p, DV + 2]
     g00, g01, g11 = geo[p, GINV], geo[p, GINV + 1], geo[p, GINV + 2]
     si, sj = g00 * qu + g01 * qv, g01 * qu + g11 * qv
     reach_i, reach_j = r_out * np.sqrt(g00) + 1e-9, r_out * np.sqrt(g11) + 1e-9
@@ -334,24 +334,27 @@ def _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, px, py, p
         return 0, 0
     j_lo = max(int(geo[p, RECT + 2]), int(np.ceil(sj - reach_j)))
     j_hi = min(int(geo[p, RECT + 3]), int(np.floor(sj + reach_j)))
+    # |q − i·du − j·dv|² = |du|²·(i − c_j)² + SCHUR·(j − sj)² + h², c_j = si − (j − sj)·SKEW, h the
+    # distance of q from the lattice's plane: per row, one centre and one half-width.
+    h2 = max(qx * qx + qy * qy + qz * qz - (si * qu + sj * qv), 0.0)
+    skew, schur, inv_uu = geo[p, SKEW], geo[p, SCHUR], geo[p, INV_UU]
+    out2, in2 = r_out * r_out, r_in * r_in
     k_in = geo[p, INV_AREA]
     f0, f1, f2 = flux[i, 0], flux[i, 1], flux[i, 2]
     tests = 0
     hits = 0
     for jl in range(j_lo, j_hi + 1):
-        ax, ay, az = qx - jl * vx, qy - jl * vy, qz - jl * vz
-        qq = ax * ax + ay * ay + az * az
-        qu = ax * ux + ay * uy + az * uz
-        perp = qq - qu * qu / uu  # squared distance from the row's line
-        if perp > r_out * r_out:
+        dj = jl - sj
+        perp = schur * dj * dj + h2  # squared distance from the row's line
+        if perp > out2:
             continue
-        centre = qu / uu
-        half = np.sqrt((r_out * r_out - perp) / uu)
+        centre = si - dj * skew
+        half = np.sqrt((out2 - perp) * inv_uu)
         lo = max(int(geo[p, RECT]), int(np.ceil(centre - half - 1e-9)))
         hi = min(int(geo[p, RECT + 1]), int(np.floor(centre + half + 1e-9)))
         in_lo, in_hi = 1, 0
-        if kernel == 0 and perp < r_in * r_in:
-            half_in = np.sqrt((r_in * r_in - perp) / uu)
+        if kernel == 0 and perp < in2:
+            half_in = np.sqrt((in2 - perp) * inv_uu)
             in_lo = int(np.ceil(centre - half_in + 1e-9))
             in_hi = int(np.floor(centre + half_in - 1e-9))
         for il in range(lo, hi + 1):
