@@ -88,6 +88,7 @@ CONFIGS = {
                  radius_texels=[1.0, 1.5, 2.0, 3.0, 4.0, 6.0], direct_samples=[2, 4, 8, 16, 32, 64],
                  scene_resolution={}, scene_reference_spp={"window_room": 16384}, scene_spp={}),
 }
+PLOT_SKIP = {"cycles+oidn-lm", "photon_map/no-denoise", "sphere_cache/no-denoise"}  # in the tables only
 LABELS = {
     "cycles": "Cycles bake, raw",
     "cycles+oidn": "Cycles bake + OIDN (RT, HDR)",
@@ -172,9 +173,11 @@ def reference_noise(halves, masks):
 
 
 def time_to(points, target):
-    """Seconds to reach `target` RMSE, interpolated on log-log axes between the first pair of runs
-    (in order of time) that straddles it; None if no run reaches it."""
-    pts = sorted(points)
+    """Seconds to reach `target` RMSE, interpolated on log-log axes between the first pair of
+    consecutive runs that straddles it; None if no run reaches it. `points` are (seconds, rmse) in
+    order of cost (sample or photon count), not of seconds: on a shared machine a cheaper run now
+    and then takes longer than the next one."""
+    pts = list(points)
     if pts and pts[0][1] <= target:
         return float(pts[0][0])
     for (t0, e0), (t1, e1) in zip(pts, pts[1:]):
@@ -185,13 +188,54 @@ def time_to(points, target):
 
 
 def error_at(points, seconds):
-    """RMSE at `seconds`, interpolated on log-log axes; None outside the measured range."""
-    pts = sorted(points)
+    """RMSE at `seconds`, interpolated on log-log axes between consecutive runs (in order of cost)
+    whose times bracket it; None outside the measured range."""
+    pts = list(points)
     for (t0, e0), (t1, e1) in zip(pts, pts[1:]):
-        if t0 <= seconds <= t1:
+        if min(t0, t1) <= seconds <= max(t0, t1) and t0 != t1:
             f = np.log(seconds / t0) / np.log(t1 / t0)
             return float(np.exp(np.log(e0) + f * (np.log(e1) - np.log(e0))))
     return None
+
+
+def summarise(res):
+    """Times to the targets per method (wall and CPU seconds) and which of them are upper bounds,
+    from the rows (recorded in order of cost)."""
+    reach, reach_cpu, below = {}, {}, {}
+    for method in dict.fromkeys(r["method"] for r in res["rows"]):
+        mine = [r for r in res["rows"] if r["method"] == method]
+        pts = [(r["seconds"], r["rmse"]) for r in mine]
+        reach[method] = {f"{round(100 * t)}%": time_to(pts, t) for t in TARGETS}
+        if all(r["cpu_seconds"] is not None for r in mine):
+            cpu = [(r["cpu_seconds"], r["rmse"]) for r in mine]
+            reach_cpu[method] = {f"{round(100 * t)}%": time_to(cpu, t) for t in TARGETS}
+        # Reached at the cheapest run already: the time is only an upper bound.
+        below[method] = [f"{round(100 * t)}%" for t in TARGETS if pts[0][1] <= t]
+    res.update(reach=reach, reach_cpu=reach_cpu, upper_bounds=below)
+    return res
+
+
+def summarise_sweep(sw):
+    """Each knob's values compared at equal CPU seconds (all threads; steadier than wall seconds
+    when other jobs share the machine): RMSE at a common time inside every curve's range (the
+    geometric middle of their overlap) and CPU seconds to the targets."""
+    summary = {}
+    for knob in ("radius_texels", "direct_samples"):
+        curves = {}
+        for r in sw["rows"]:
+            if r["knob"] == knob and r["denoised"]:
+                curves.setdefault(r["value"], []).append((r["cpu_seconds"], r["rmse"]))
+        if not curves:
+            continue
+        lo = max(min(t for t, _ in p) for p in curves.values())
+        hi = min(max(t for t, _ in p) for p in curves.values())
+        at = float(np.sqrt(lo * hi)) if hi >= lo else None
+        per = {str(v): {"error_at": None if at is None else error_at(p, at),
+                        **{f"{round(100 * t)}%": time_to(p, t) for t in TARGETS}} for v, p in curves.items()}
+        scored = [(e["error_at"], v) for v, e in per.items() if e["error_at"] is not None]
+        summary[knob] = {"at_seconds": at, "values": per, "best": min(scored)[1] if scored else None}
+    sw["summary"] = summary
+    return sw
 
 
 def denoise_all(images, masks, filter_):
@@ -285,20 +329,9 @@ def bench_scene(label_, cfg, cache, log):
             if run(steps[i] if key == "cycles" else index):
                 stopped.add(key)
 
-    reach, reach_cpu, below = {}, {}, {}
-    for method in dict.fromkeys(r["method"] for r in rows):
-        mine = [r for r in rows if r["method"] == method]
-        pts = [(r["seconds"], r["rmse"]) for r in mine]
-        reach[method] = {f"{round(100 * t)}%": time_to(pts, t) for t in TARGETS}
-        if all(r["cpu_seconds"] is not None for r in mine):
-            cpu = [(r["cpu_seconds"], r["rmse"]) for r in mine]
-            reach_cpu[method] = {f"{round(100 * t)}%": time_to(cpu, t) for t in TARGETS}
-        # Reached at the cheapest run already: the time is only an upper bound.
-        below[method] = [f"{round(100 * t)}%" for t in TARGETS if min(pts)[1] <= t]
-    return {"scene": label_, "resolution": res, "objects": len(names), "triangles": scene.triangle_count,
-            "texels": sum(int(m.sum()) for m in masks.values()), "reference_spp": cfg["ref_spp"],
-            "reference_seconds": ref_seconds, "reference_noise": sigma, "rows": rows, "reach": reach,
-            "reach_cpu": reach_cpu, "upper_bounds": below}
+    return summarise({"scene": label_, "resolution": res, "objects": len(names), "triangles": scene.triangle_count,
+                      "texels": sum(int(m.sum()) for m in masks.values()), "reference_spp": cfg["ref_spp"],
+                      "reference_seconds": ref_seconds, "reference_noise": sigma, "rows": rows})
 
 
 def sweep_scene(label_, cfg, cache, log):
@@ -341,26 +374,10 @@ def sweep_scene(label_, cfg, cache, log):
             row = rows[-2]
             log(f"sweep {label_:10} {knob:15} {value:>5} {photons:>9,} ph. {wall:7.2f} s (CPU {cpu:7.2f} s)  "
                 f"RMSE {100 * row['rmse']:5.2f} % (raw {100 * rows[-1]['rmse']:5.2f} %)  bias {100 * row['bias']:+5.2f} %")
-    # Compared at equal CPU seconds (all threads): steadier than wall seconds when other jobs share
-    # the machine, and the same ranking on an idle one.
-    summary = {}
-    for knob in ("radius_texels", "direct_samples"):
-        curves = {}
-        for value in cfg[knob]:
-            pts = [(r["cpu_seconds"], r["rmse"]) for r in rows
-                   if r["knob"] == knob and r["value"] == value and r["denoised"]]
-            curves[value] = pts
-        # A common time inside every curve's range: the geometric middle of the overlap.
-        lo = max(min(t for t, _ in p) for p in curves.values())
-        hi = min(max(t for t, _ in p) for p in curves.values())
-        at = float(np.sqrt(lo * hi)) if hi >= lo else None
-        per = {str(v): {"error_at": None if at is None else error_at(p, at),
-                        **{f"{round(100 * t)}%": time_to(p, t) for t in TARGETS}} for v, p in curves.items()}
-        scored = [(e["error_at"], v) for v, e in per.items() if e["error_at"] is not None]
-        summary[knob] = {"at_seconds": at, "values": per, "best": min(scored)[1] if scored else None}
-    return {"scene": label_, "resolution": res, "reference_spp": cfg["ref_spp"], "reference_noise": sigma,
-            "default": {"radius_texels": base.estimator_settings.radius_texels,
-                        "direct_samples": base.direct_samples}, "rows": rows, "summary": summary}
+    return summarise_sweep({"scene": label_, "resolution": res, "reference_spp": cfg["ref_spp"],
+                            "reference_noise": sigma, "default": {"radius_texels": base.estimator_settings.radius_texels,
+                                                                  "direct_samples": base.direct_samples},
+                            "rows": rows})
 
 
 def compositor_check(label_, cfg, log):
@@ -507,7 +524,9 @@ def plot(res, out_dirs):
         return None
     fig, ax = plt.subplots(figsize=(7, 5))
     for method in dict.fromkeys(r["method"] for r in res["rows"]):
-        pts = sorted((r["seconds"], r["rmse"]) for r in res["rows"] if r["method"] == method)
+        if method in PLOT_SKIP:
+            continue
+        pts = [(r["seconds"], r["rmse"]) for r in res["rows"] if r["method"] == method]  # in order of cost
         style = "s--" if method.startswith("cycles") else "o-"
         ax.loglog(*zip(*pts), style, label=label(method).replace("`", ""), ms=4)
     for level in TARGETS:
@@ -533,11 +552,11 @@ def plot_sweep(sw, out_dirs):
     for ax, knob in zip(axes, ("radius_texels", "direct_samples")):
         values = dict.fromkeys(r["value"] for r in sw["rows"] if r["knob"] == knob)
         for value in values:
-            pts = sorted((r["cpu_seconds"], r["rmse"]) for r in sw["rows"]
-                         if r["knob"] == knob and r["value"] == value and r["denoised"])
+            pts = [(r["cpu_seconds"], r["rmse"]) for r in sw["rows"]
+                   if r["knob"] == knob and r["value"] == value and r["denoised"]]
             ax.loglog(*zip(*pts), "o-", label=f"{knob} {value}", ms=4)
         ax.set(xlabel="CPU seconds (all threads)", ylabel="relative RMSE vs converged Cycles",
-               title=f"{sw['scene']}: {knob} (default method, denoised)")
+               title=f"{sw['scene']}: {knob}")
         ax.legend(fontsize=6)
     fig.tight_layout()
     paths = []
@@ -557,6 +576,8 @@ def main(argv=None):
     ap.add_argument("--scenes", default="cornell_box,l_room,window_room,patio", help="comma-separated, or none")
     ap.add_argument("--sweep-scene", default="l_room", help="scene for the radius/shadow-ray sweeps, or none")
     ap.add_argument("--estimators", default=None, help="comma-separated subset of the configuration's estimators")
+    ap.add_argument("--replot", metavar="JSON", default=None,
+                    help="no baking: re-derive the tables and plots from an earlier quality.json")
     ap.add_argument("--references-only", action="store_true",
                     help="bake (and cache) the references of --scenes, then stop")
     ap.add_argument("--compositor-check", action="store_true",
@@ -580,6 +601,17 @@ def main(argv=None):
 
     log(f"{os.cpu_count()} cores, {numba.get_num_threads()} threads; OIDN through pyoidn "
         "(Intel Open Image Denoise, the library behind Blender's compositor Denoise node)")
+    if args.replot:
+        doc = json.loads(Path(args.replot).read_text())
+        for res in doc["results"]:
+            res["plot"] = plot(summarise(res), dirs)
+        for sw in doc["sweeps"]:
+            sw["plot"] = plot_sweep(summarise_sweep(sw), dirs)
+        text = markdown(doc["results"], doc["sweeps"], doc["cores"], doc["threads"])
+        print(text)
+        (out / "quality.json").write_text(json.dumps(doc, indent=1))
+        (out / "quality.md").write_text(text + "\n")
+        return 0
     if args.references_only:
         import bpy
         from detp_bake import blender_scene
