@@ -1,10 +1,11 @@
 """A bounding-volume hierarchy over the DETP discs, built from their Z-order, compiled with numba.
 
-Build: the discs are sorted along a 63-bit Morton curve (morton.py) and a node splits its run of
-discs where the highest Morton bit that differs across the run flips (a radix split, the idea of
-Karras's LBVH), so every node is one cell of the Z-order octree and its box stays compact. No sort
-per level: the codes are sorted once, and the split is a binary search. Runs of equal codes split
-in the middle. Leaves hold at most `leaf` discs.
+Build: the items (loose discs, and lattice patches of a flat chart's discs: patches.py) are sorted
+along a 63-bit Morton curve (morton.py) and a node splits its run of items where the highest
+Morton bit that differs across the run flips (a radix split, the idea of Karras's LBVH), so every
+node is one cell of the Z-order octree and its box stays compact. No sort per level: the codes
+are sorted once, and the split is a binary search. Runs of equal codes split in the middle.
+Leaves hold one item or at most `leaf` discs; discs are stored in item order.
 
 Each node is one float32 row: its box, rounded outwards so that a segment never misses a disc it
 crosses, and a normal cone (axis a, threshold c) such that every disc below it faces away from any
@@ -13,6 +14,9 @@ leaving a floor skips the floor's whole subtree instead of testing every disc ro
 
 `clusters` cut the tree into subtrees of at most `cluster` discs: the disc index's unit of parallel
 work. Every disc lies in one cluster, so no two threads ever add to the same disc.
+
+The same radix tree over triangle boxes serves tangent clearance (discs_meet_triangles): which
+texels need Embree's rays at all.
 """
 from __future__ import annotations
 
@@ -27,6 +31,7 @@ LEAF_SIZE = 4
 CONE_NONE = 2.0  # a threshold no unit direction reaches: the node's discs face every way
 # Row layout of `node`: box lo (0-2), box hi (3-5), cone axis (6-8), cone threshold (9).
 LO, HI, AXIS, CONE = 0, 3, 6, 9
+STACK_DEPTH = 256  # a walk holds at most depth + 1 nodes; radix splits of 63-bit codes go < 100 deep
 
 
 @dataclass
@@ -418,9 +423,6 @@ def _discs_meet(tri, tri_lo, tri_hi, order, node, left, first, count, origin, no
                 if below and above:
                     out[i] = True
                     break
-
-
-STACK_DEPTH = 256
 
 
 def discs_meet_triangles(positions: np.ndarray, origin: np.ndarray, normal: np.ndarray,

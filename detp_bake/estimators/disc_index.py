@@ -15,6 +15,9 @@ A batch goes in three steps:
 Every disc belongs to one cluster and sums its segments in batch order, so the estimate is the
 same, bit for bit, on any number of threads and with or without patches, and one accumulator
 serves all threads. benchmarks/estimators.py --profile has the counters and seconds per step.
+
+The kernels inline crossing_weight (discs.py) and patch_splat (patches.py). numba's cache checks
+only this file's date: after editing those, touch this file (or clear NUMBA_CACHE_DIR).
 """
 from __future__ import annotations
 
@@ -24,7 +27,7 @@ import numba
 import numpy as np
 
 from . import Estimate, Estimator, patches, register
-from .bvh import AXIS, CONE, HI, LO, build
+from .bvh import AXIS, CONE, HI, LO, STACK_DEPTH, build
 from .discs import crossing_weight, make_discs
 from .morton import segment_order
 from .patches import SIDE, form_patches, group_keys, mark_cut, patch_splat
@@ -34,7 +37,6 @@ PATCHES = True  # flat charts' texels as lattice patches (patches.py)
 CLUSTERS_PER_THREAD = 4  # units of parallel work: more means more binning, fewer means worse balance
 MIN_CLUSTER = 4096  # discs
 BIN_CHUNK = 1 << 12  # segments per binning task
-STACK = 256  # deeper than any tree over 63-bit codes
 ORDER_AT = 1.0  # segments are walked in Z-order of this point along them (0.5: midpoint, 1: end)
 
 
@@ -81,7 +83,7 @@ def _bin(o, w, length, eps, node, left, cluster_of, chunk, cap, seg, clu, used, 
     in segment order. A chunk that fills its `cap` slots reports used = -1."""
     n = o.shape[0]
     for ch in numba.prange(used.shape[0]):
-        stack = np.empty(STACK, np.int32)
+        stack = np.empty(STACK_DEPTH, np.int32)
         k = 0
         t = 0
         for i in range(ch * chunk, min(n, (ch + 1) * chunk)):
@@ -137,7 +139,7 @@ def _splat(o, w, length, flux, eps, kernel, node, left, item_first, item_count, 
     """Step 3: each cluster walks its segments through its subtree; its discs are its own."""
     for s in numba.prange(schedule.shape[0]):
         c = schedule[s]
-        stack = np.empty(STACK, np.int32)
+        stack = np.empty(STACK_DEPTH, np.int32)
         node_tests = 0
         disc_tests = 0
         crossings = 0
