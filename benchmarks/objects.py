@@ -6,7 +6,7 @@ direct and indirect light so that a bias can be traced to the part that makes it
                                  [--spp 128] [--direct-spp 64] [--out DIR]
 
 For each scene every mesh is baked at `--resolution`² per object:
-- Cycles' own bake (`blender_scene.cycles_bake`: Diffuse, DIRECT+INDIRECT, no COLOR, adaptive
+- Cycles' own bake (`blender.cycles_bake`: Diffuse, DIRECT+INDIRECT, no COLOR, adaptive
   sampling off), once with the scene's diffuse bounces (`--spp`) and once with bounces = 0
   (`--direct-spp`: direct light only), each as two halves with seeds 1 and 2 whose difference
   gives Cycles' own noise. Cached under OUT/cache, keyed by the .blend's bytes, the settings and
@@ -77,7 +77,7 @@ def quiet_stdout():
 def cycles_references(bpy, scene_name, names, resolution, spp, direct_spp, cache: Path, log):
     """{"full": [half_a, half_b], "direct": [half_a, half_b]}, each half {object: (H, W, 3)}, and
     the seconds spent baking (None when cached)."""
-    from detp_bake import blender_scene
+    from detp_bake import blender
     blend = scenes.SAMPLES / f"{scene_name}.blend"
     key = hashlib.sha256(blend.read_bytes() + json.dumps(
         ["objects", bpy.app.version_string, resolution, spp, direct_spp, SEEDS, sorted(names)]).encode())
@@ -94,7 +94,7 @@ def cycles_references(bpy, scene_name, names, resolution, spp, direct_spp, cache
         refs[part] = []
         for seed in SEEDS:
             with quiet_stdout():
-                refs[part].append(blender_scene.cycles_bake(bpy.context.scene, names, resolution=resolution,
+                refs[part].append(blender.cycles_bake(bpy.context.scene, names, resolution=resolution,
                                                             samples=max(1, samples // len(SEEDS)),
                                                             bounces=bounces, seed=seed))
     seconds = time.perf_counter() - t0

@@ -7,7 +7,7 @@ run, against a converged Cycles reference on the same texels.
 
 Methods (each bakes every mesh of the scene at the configuration's resolution):
 - `cycles`: Cycles' Diffuse bake (DIRECT+INDIRECT, no COLOR, adaptive sampling off), a ladder of
-  sample counts (`blender_scene.cycles_bake`, in this process);
+  sample counts (`blender.cycles_bake`, in this process);
 - `cycles+oidn`: the same bakes, each lightmap then denoised by OIDN's RT filter in HDR mode
   (`denoise.denoise_lightmap(filter="RT")` on the texels Cycles baked: the gutter filled first,
   a white albedo guide): the library and filter Blender's compositor Denoise node runs. Its
@@ -129,15 +129,15 @@ def timed(fn):
     return out, time.perf_counter() - w0, time.process_time() - c0
 
 
-def cycles(bpy, blender_scene, names, resolution, spp, seed):
+def cycles(bpy, blender, names, resolution, spp, seed):
     # Cycles' bake jitters its sample points uniformly over the texel, whatever the film's pixel
     # filter (measured: a 1-px box and the default 1.5-px Blackman-Harris bake the same bytes):
     # the same footprint as ours, the texel's covered square.
     with quiet_stdout():
-        return blender_scene.cycles_bake(bpy.context.scene, names, resolution=resolution, samples=spp, seed=seed)
+        return blender.cycles_bake(bpy.context.scene, names, resolution=resolution, samples=spp, seed=seed)
 
 
-def reference(bpy, blender_scene, label_, names, resolution, spp, cache: Path, log):
+def reference(bpy, blender, label_, names, resolution, spp, cache: Path, log):
     """Cycles at `spp` samples as two halves (seeds 1 and 2): (mean image per object, the halves)."""
     path = scenes.SAMPLES / f"{label_}.blend"
     key = hashlib.sha256(path.read_bytes() + json.dumps([resolution, spp, "halves", sorted(names)]).encode())
@@ -148,7 +148,7 @@ def reference(bpy, blender_scene, label_, names, resolution, spp, cache: Path, l
         halves = [{n: data[f"{h}:{n}"] for n in names} for h in "ab"]
     else:
         log(f"{label_}: baking the reference, Cycles at {spp} spp ({resolution}² per object, once; cached)")
-        halves, seconds, _ = timed(lambda: [cycles(bpy, blender_scene, names, resolution, spp // 2, seed)
+        halves, seconds, _ = timed(lambda: [cycles(bpy, blender, names, resolution, spp // 2, seed)
                                             for seed in (1, 2)])
         cache.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(file, **{f"{h}:{n}": img[n] for h, img in zip("ab", halves) for n in names})
@@ -259,9 +259,9 @@ def bench_scene(label_, cfg, cache, log):
     res = cfg["res"]
     scene = scenes.blend_scene(label_, res)
     import bpy
-    from detp_bake import blender_scene
+    from detp_bake import blender
     names = [o.name for o in scene.objects]
-    ref, halves, ref_seconds = reference(bpy, blender_scene, label_, names, res, cfg["ref_spp"], cache, log)
+    ref, halves, ref_seconds = reference(bpy, blender, label_, names, res, cfg["ref_spp"], cache, log)
 
     # Load every compiled kernel and OIDN outside the timings; take the masks from this bake.
     warm = {}
@@ -269,7 +269,7 @@ def bench_scene(label_, cfg, cache, log):
         warm = compute(scene, ours_settings(cfg, name, photons=2000))
         compute(scene, ours_settings(cfg, name, photons=2000, direct="photons", denoise=False))
     masks = warm.centre_masks
-    cycles(bpy, blender_scene, names, res, 1, 0)
+    cycles(bpy, blender, names, res, 1, 0)
     sigma = reference_noise(halves, masks)
     log(f"{label_}: {len(names)} objects, {scene.triangle_count:,} triangles, {res}² per object, "
         f"{sum(int(m.sum()) for m in masks.values()):,} texels compared; reference {cfg['ref_spp']} spp, "
@@ -290,7 +290,7 @@ def bench_scene(label_, cfg, cache, log):
         return row["rmse"]
 
     def run_cycles(spp):
-        imgs, wall, cpu = timed(lambda: cycles(bpy, blender_scene, names, res, spp, 7))
+        imgs, wall, cpu = timed(lambda: cycles(bpy, blender, names, res, spp, 7))
         raw = record("cycles", {"samples": spp}, wall, cpu, imgs)
         out = {}
         for method, filter_ in ((RIVAL, "RT"), ("cycles+oidn-lm", "RTLightmap")):
@@ -340,9 +340,9 @@ def sweep_scene(label_, cfg, cache, log):
     res = cfg["res"]
     scene = scenes.blend_scene(label_, res)
     import bpy
-    from detp_bake import blender_scene
+    from detp_bake import blender
     names = [o.name for o in scene.objects]
-    ref, halves, _ = reference(bpy, blender_scene, label_, names, res, cfg["ref_spp"], cache, log)
+    ref, halves, _ = reference(bpy, blender, label_, names, res, cfg["ref_spp"], cache, log)
     base = BakeSettings()
     if base.estimator_settings.radius_texels is None:  # the bake picks the radius by direct mode
         from detp_bake import estimators
@@ -385,12 +385,12 @@ def compositor_check(label_, cfg, log):
     Blender's compositor Denoise node fed the same gutter-filled image and a white albedo image:
     the largest difference over the baked texels, relative to their mean."""
     import bpy
-    from detp_bake import blender_scene
+    from detp_bake import blender
     res = for_scene(cfg, label_)["res"]
     scene_ = scenes.blend_scene(label_, res)
     obj = scene_.objects[0].name
     masks = compute(scene_, BakeSettings(photons=1000, resolution=res, denoise=False)).centre_masks
-    img = cycles(bpy, blender_scene, [obj], res, cfg["spp"][0], 7)[obj]
+    img = cycles(bpy, blender, [obj], res, cfg["spp"][0], 7)[obj]
     mask = masks[obj]
     ours = denoise.denoise_lightmap(img, mask, filter="RT", margin=0)
     filled = denoise.fill_gutter(np.maximum(np.where(mask[..., None], img, 0.0), 0.0).astype(np.float32), mask)
@@ -614,11 +614,11 @@ def main(argv=None):
         return 0
     if args.references_only:
         import bpy
-        from detp_bake import blender_scene
+        from detp_bake import blender
         for label_ in args.scenes.split(","):
             c = for_scene(cfg, label_)
             names = [o.name for o in scenes.blend_scene(label_, c["res"]).objects]
-            _, _, seconds = reference(bpy, blender_scene, label_, names, c["res"], c["ref_spp"], out / "cache", log)
+            _, _, seconds = reference(bpy, blender, label_, names, c["res"], c["ref_spp"], out / "cache", log)
             log(f"{label_}: reference " + ("cached already" if seconds is None else f"baked in {seconds:.0f} s"))
         return 0
     first = args.sweep_scene if args.scenes == "none" else args.scenes.split(",")[0]

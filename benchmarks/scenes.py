@@ -24,7 +24,7 @@ def blend_scene(name: str, resolution: int = 64) -> Scene:
     dir unless one is set already."""
     os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="detp_bench_blender_"))
     import bpy
-    from detp_bake.blender_scene import export_scene
+    from detp_bake.blender import export_scene
 
     bpy.ops.wm.open_mainfile(filepath=str(SAMPLES / f"{name}.blend"))
     return export_scene(bpy.context.scene, bpy.context.evaluated_depsgraph_get(), None, None,

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -123,28 +122,21 @@ def _open_scene(args, settings, bl_scene):
     if args.save:
         images.check_writable_dir(Path(args.save).resolve().parent)
     try:
-        import bpy
-    except ImportError:
+        from . import blender
+    except ImportError as exc:
+        if exc.name != "bpy":
+            raise
         raise BakeError("the 'bpy' module is not installed: run inside Blender or install the bpy wheel "
                         "(make demo sets one up)") from None
-    from . import blender_scene
     if bl_scene is None:
-        path = Path(args.scene)
-        if not path.is_file() or not os.access(path, os.R_OK):
-            raise BakeError(f"cannot read scene file '{path}'")
-        try:
-            bpy.ops.wm.open_mainfile(filepath=str(path.resolve()))
-        except RuntimeError as exc:
-            raise BakeError(f"cannot open scene file '{path}': {exc}") from None
-        bl_scene = bpy.context.scene
+        bl_scene = blender.open_blend(Path(args.scene))
     t0 = time.perf_counter()
     from .memory import geometry_budget
-    scene = blender_scene.export_scene(bl_scene, bpy.context.evaluated_depsgraph_get(), args.objects,
-                                       args.uv_layer, settings.resolution, _log,
-                                       max_bytes=geometry_budget(settings.memory_budget_mb) or None)
+    scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
+                                 max_bytes=geometry_budget(settings.memory_budget_mb) or None)
     _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
          f"baking {sum(o.bake for o in scene.objects)} objects")
-    return bpy, blender_scene, bl_scene, scene, out_dir, time.perf_counter() - t0
+    return blender, bl_scene, scene, out_dir, time.perf_counter() - t0
 
 
 def run_compare(args, bl_scene=None) -> int:
@@ -152,7 +144,7 @@ def run_compare(args, bl_scene=None) -> int:
     settings = settings_from_args(args)
     for name in args.estimators:
         replace(settings, estimator=name).validate()
-    bpy, blender_scene, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
+    blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
     from . import comparison
     results = bake_mod.compute_many(scene, settings, args.estimators, StderrProgress())
     for result in results.values():
@@ -182,31 +174,16 @@ def _log_noise(result) -> None:
              (f" (+{len(worst) - 8} more in report.json)" if len(worst) > 8 else ""))
 
 
-def _paths_relative_to(bpy, files: dict, blend: Path) -> None:
-    """Point the lightmap images at their files relative to the .blend about to be saved (//…),
-    so it opens with its lightmaps from any folder; absolute where no relative path exists."""
-    ours = {os.path.normcase(os.path.abspath(p)) for paths in files.values() for p in paths}
-    for img in bpy.data.images:
-        path = os.path.normcase(os.path.abspath(bpy.path.abspath(img.filepath))) if img.filepath else None
-        if path in ours:
-            try:
-                img.filepath = "//" + Path(os.path.relpath(path, blend.parent)).as_posix()
-            except ValueError:  # another drive
-                img.filepath = path
-
-
 def run_bake(args, bl_scene=None) -> int:
     """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene)."""
     settings = settings_from_args(args)
-    bpy, blender_scene, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
+    blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
     result = bake_mod.bake(scene, settings, out_dir, StderrProgress(), export_seconds=export_seconds)
     _log_noise(result)
     if args.apply:
-        blender_scene.apply_all(bl_scene, result.files, args.uv_layer, settings.estimator)
+        blender.apply_all(bl_scene, result.files, args.uv_layer, settings.estimator)
     if args.save:
-        target = Path(args.save).resolve()
-        _paths_relative_to(bpy, result.files, target)
-        bpy.ops.wm.save_as_mainfile(filepath=str(target), copy=False, relative_remap=False)
+        blender.save_blend(Path(args.save).resolve(), result.files)
         print(f"detp_bake: saved {args.save}", file=sys.stderr)
     for name, files in result.files.items():
         for f in files:

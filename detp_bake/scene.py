@@ -1,6 +1,6 @@
 """Plain scene data: what the photon tracer and the texel rasteriser need, and nothing of Blender.
 
-The Blender adapter (the `blender_scene` package) fills these dataclasses; tests build them by hand. All
+The Blender adapter (the `blender` package) fills these dataclasses; tests build them by hand. All
 geometry is in world space, metres; colours are linear RGB; powers are watts as Cycles reads them
 (see DESIGN.md §3 and `lights.py` for the exact conventions).
 """
@@ -156,7 +156,7 @@ class Scene:
     albedo_texture: Optional[np.ndarray] = None
     opacity: Optional[np.ndarray] = None
     opacity_texture: Optional[np.ndarray] = None
-    # What the exporter found (blender_scene.export_scene): instance and triangle counts, bytes per
+    # What the exporter found (blender.export_scene): instance and triangle counts, bytes per
     # triangle, what it left out and why. Plain JSON-able values, for report.json.
     export_stats: dict = field(default_factory=dict)
 

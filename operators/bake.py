@@ -7,7 +7,7 @@ import traceback
 
 import bpy
 
-from ..detp_bake import bake, blender_scene, images
+from ..detp_bake import bake, blender, images
 from ..detp_bake.errors import BakeCancelled, BakeError
 from . import common
 
@@ -50,7 +50,7 @@ class BakeJob:
             self.scene = common.export(context, [context.scene.objects[n] for n in self.objects],
                                        self.messages.append, self.created_uv)
         except BaseException:
-            blender_scene.remove_uv_layers(context.scene, self.created_uv)
+            blender.remove_uv_layers(context.scene, self.created_uv)
             raise
         self.export_seconds = time.perf_counter() - t0
 
@@ -89,7 +89,7 @@ class BakeJob:
         for msg in self.messages:
             report({"INFO"}, msg)
         if self.cancelled or self.error or self.result is None:
-            blender_scene.remove_uv_layers(context.scene, self.created_uv)
+            blender.remove_uv_layers(context.scene, self.created_uv)
             if self.error:
                 report({"ERROR"}, self.error)
             else:
@@ -99,7 +99,7 @@ class BakeJob:
         s = context.scene.detp_bake
         if s.apply_after_bake and "exr" in r.settings.formats:
             uv = common.uv_layers([context.scene.objects[n] for n in self.objects if n in context.scene.objects])
-            blender_scene.apply_all(context.scene, r.files, uv, r.settings.estimator)
+            blender.apply_all(context.scene, r.files, uv, r.settings.estimator)
         summary = r.report()
         s.last_report = json.dumps({"estimator": r.settings.estimator, "photons": summary["photons"],
                                     "segments": summary["segments"], "objects": len(r.files),
@@ -181,7 +181,7 @@ class DETPBAKE_OT_bake(bpy.types.Operator):
         if self._job.thread is not None:
             self._job.thread.join()
         self._end(context)
-        blender_scene.remove_uv_layers(context.scene, self._job.created_uv)
+        blender.remove_uv_layers(context.scene, self._job.created_uv)
 
     def _end(self, context):
         wm = context.window_manager

@@ -2,7 +2,7 @@
 and a Blender scene exported for the core."""
 import bpy
 
-from ..detp_bake import blender_scene, memory, texels
+from ..detp_bake import blender, memory, texels
 from ..detp_bake.bake import BakeSettings
 from ..detp_bake.estimators import EstimatorSettings
 
@@ -35,7 +35,7 @@ def output_directory(context) -> str:
 def bake_targets(context) -> list:
     """Selected meshes marked Include, or every rendered included mesh when none is selected (what
     F12 renders: a mesh hidden in the viewport but rendered is baked too)."""
-    rendered = blender_scene.rendered_names(context.view_layer)
+    rendered = blender.rendered_names(context.view_layer)
 
     def ok(o):
         return o.type == "MESH" and o.name in rendered and o.detp_bake.include
@@ -45,7 +45,7 @@ def bake_targets(context) -> list:
 
 def uv_layers(objects) -> dict:
     """Per-object UV layer names that the user set explicitly (the default may be created)."""
-    return {o.name: o.detp_bake.uv_layer for o in objects if o.detp_bake.uv_layer != blender_scene.DEFAULT_UV}
+    return {o.name: o.detp_bake.uv_layer for o in objects if o.detp_bake.uv_layer != blender.DEFAULT_UV}
 
 
 def export(context, objects, log, created=None):
@@ -54,7 +54,7 @@ def export(context, objects, log, created=None):
     sizes = {o.name: o.detp_bake.resolution or s.resolution for o in objects}
     prefs = preferences(context)
     budget = memory.geometry_budget(prefs.memory_budget if prefs is not None else 0)
-    scene = blender_scene.export_scene(context.scene, context.evaluated_depsgraph_get(), [o.name for o in objects],
+    scene = blender.export_scene(context.scene, context.evaluated_depsgraph_get(), [o.name for o in objects],
                                        uv_layers(objects), sizes, log, created, max_bytes=budget or None)
     if s.resolution_mode == "DENSITY":
         for obj in scene.objects:

@@ -6,7 +6,7 @@ import numpy as np
 from bpy.props import EnumProperty
 from mathutils import Matrix
 
-from ..detp_bake import bake, blender_scene, comparison, images
+from ..detp_bake import bake, blender, comparison, images
 from ..detp_bake.errors import BakeCancelled, BakeError
 from ..ui.properties import ESTIMATORS
 from . import common
@@ -21,7 +21,7 @@ def clear(context) -> int:
     removed = 0
     coll = bpy.data.collections.get(COLLECTION)
     for obj in [o for o in bpy.data.objects if MARK in o]:
-        blender_scene.revert(obj)
+        blender.revert(obj)
         data = obj.data if obj.type == "FONT" else None
         bpy.data.objects.remove(obj)
         if data is not None and data.users == 0:
@@ -50,7 +50,7 @@ def run_compare(context, names, report, progress=None, cancel=None) -> dict:
         for result in results.values():
             bake.write(result, out_dir, progress, cancel)
     except BaseException:
-        blender_scene.remove_uv_layers(context.scene, created)
+        blender.remove_uv_layers(context.scene, created)
         raise
     clear(context)
     seconds = {n: r.seconds["estimate"] for n, r in results.items()}
@@ -76,13 +76,13 @@ def run_compare(context, names, report, progress=None, cancel=None) -> dict:
             dup.parent = None
             dup.matrix_world = offset @ obj.matrix_world
             dup[MARK] = name
-            if blender_scene.REVERT_KEY in dup:
-                del dup[blender_scene.REVERT_KEY]  # the original's record, not the duplicate's
+            if blender.REVERT_KEY in dup:
+                del dup[blender.REVERT_KEY]  # the original's record, not the duplicate's
             for c in list(dup.users_collection):
                 c.objects.unlink(dup)
             coll.objects.link(dup)
             dups[obj.name] = dup
-        blender_scene.apply_all(context.scene, results[name].files, uv, name, objects=dups, copy_materials=True)
+        blender.apply_all(context.scene, results[name].files, uv, name, objects=dups, copy_materials=True)
         curve = bpy.data.curves.new(f"detp_bake label {name}", "FONT")
         curve.body = f"{name}\n{seconds[name]:.2f} s   diff {100 * diffs[name]:.1f} %"
         curve.size = max(0.1, (hi[2] - lo[2]) * 0.08)

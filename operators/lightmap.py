@@ -7,7 +7,7 @@ import bpy
 import numpy as np
 from bpy.props import EnumProperty
 
-from ..detp_bake import blender_scene, images
+from ..detp_bake import blender, images
 from ..detp_bake.errors import BakeError
 from . import common
 
@@ -49,7 +49,7 @@ class DETPBAKE_OT_apply(bpy.types.Operator):
             self.report({"ERROR"}, f"no {estimator} lightmaps in {common.output_directory(context)}: bake first")
             return {"CANCELLED"}
         try:
-            blender_scene.apply_all(context.scene, files, common.uv_layers(objects), estimator)
+            blender.apply_all(context.scene, files, common.uv_layers(objects), estimator)
         except BakeError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -66,7 +66,7 @@ class DETPBAKE_OT_revert(bpy.types.Operator):
 
     def execute(self, context):
         objs = context.selected_objects or list(context.scene.objects)
-        n = sum(blender_scene.revert(o) for o in objs)
+        n = sum(blender.revert(o) for o in objs)
         self.report({"INFO"}, f"Reverted {n} objects" if n else "Nothing to revert")
         return {"FINISHED"}
 
@@ -79,11 +79,11 @@ class DETPBAKE_OT_open_image(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         obj = context.active_object
-        return obj is not None and blender_scene.REVERT_KEY in obj
+        return obj is not None and blender.REVERT_KEY in obj
 
     def execute(self, context):
         obj = context.active_object
-        image = bpy.data.images.get(json.loads(obj[blender_scene.REVERT_KEY]).get("image", ""))
+        image = bpy.data.images.get(json.loads(obj[blender.REVERT_KEY]).get("image", ""))
         if image is None:
             self.report({"ERROR"}, f"object '{obj.name}' has no lightmap image")
             return {"CANCELLED"}
@@ -108,7 +108,7 @@ def _xatlas_unwrap(obj, layer, resolution):
     Returns xatlas' utilisation of the lightmap."""
     import xatlas
 
-    blender_scene.unwrap_into(obj, layer, lambda: bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0))
+    blender.unwrap_into(obj, layer, lambda: bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0))
     me = obj.data
     me.calc_loop_triangles()
     tri_l = np.empty(len(me.loop_triangles) * 3, np.int64)
@@ -172,7 +172,7 @@ class DETPBAKE_OT_unwrap(bpy.types.Operator):
                 if existed:
                     obj.data.uv_layers.remove(obj.data.uv_layers[layer])
                 # Lightmap Pack leaves 2 / int(100 / margin) of UV space between charts: about 3 texels.
-                blender_scene.ensure_lightmap_uv(obj, layer, margin=float(np.clip(150.0 / res, 0.001, 1.0)))
+                blender.ensure_lightmap_uv(obj, layer, margin=float(np.clip(150.0 / res, 0.001, 1.0)))
         self.report({"INFO"}, f"Unwrapped {len(objects)} objects into '{objects[0].detp_bake.uv_layer}' "
                               f"with {'xatlas' if self.method == 'XATLAS' else 'Lightmap Pack'}")
         return {"FINISHED"}

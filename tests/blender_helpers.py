@@ -3,9 +3,9 @@ import numpy as np
 
 
 def export(bpy, objects=None, uv_layer=None, resolution=32):
-    from detp_bake import blender_scene
+    from detp_bake import blender
     scene = bpy.context.scene
-    return blender_scene.export_scene(scene, bpy.context.evaluated_depsgraph_get(), objects, uv_layer,
+    return blender.export_scene(scene, bpy.context.evaluated_depsgraph_get(), objects, uv_layer,
                                       resolution, log=lambda msg: None)
 
 

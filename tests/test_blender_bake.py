@@ -7,7 +7,7 @@ import pytest
 
 from conftest import CORNELL
 from blender_helpers import export, plane_object, principled, relative_rmse, scene_snapshot
-from detp_bake import blender_scene
+from detp_bake import blender
 from detp_bake.bake import BakeSettings, bake, compute
 from detp_bake.estimators import EstimatorSettings
 from detp_bake.photons import PhotonTracer
@@ -61,7 +61,7 @@ def cornell_reference(bpy):
     """Cycles' own bake of every Cornell box object at 32², 128 spp, in this process."""
     bpy.ops.wm.open_mainfile(filepath=str(CORNELL))
     names = [o.name for o in bpy.context.scene.objects if o.type == "MESH"]
-    return blender_scene.cycles_bake(bpy.context.scene, names, resolution=32, samples=128)
+    return blender.cycles_bake(bpy.context.scene, names, resolution=32, samples=128)
 
 
 @pytest.mark.parametrize("name, direct, mean_tol, rmse_tol", [
@@ -99,7 +99,7 @@ def test_emissive_mesh_and_world_match_cycles(empty_blend, bpy, direct):
     plane_object(bpy, "Emitter", 1.0, (0, 0, 1.0), rotation=(np.pi, 0, 0),
                  material=principled(bpy, "Glow", base=(0, 0, 0), emission=(1, 1, 1), strength=2.0))
     sc = export(bpy, objects=["Receiver"], resolution=16)
-    ref = blender_scene.cycles_bake(scene, ["Receiver"], resolution=16, samples=256, bounces=0)
+    ref = blender.cycles_bake(scene, ["Receiver"], resolution=16, samples=256, bounces=0)
     r = compute(sc, BakeSettings(photons=1_000_000, bounces=0, direct=direct,
                                  estimator_settings=EstimatorSettings(k=400)))
     m = r.centre_masks["Receiver"]
@@ -124,10 +124,10 @@ def test_apply_then_revert_restores_materials_exactly(cornell, bpy, tmp_path):
     sc = export(bpy, resolution=16)
     result = bake(sc, BakeSettings(photons=50_000), tmp_path)
     scene = bpy.context.scene
-    objs = blender_scene.apply_all(scene, result.files, None, "disc_index")
+    objs = blender.apply_all(scene, result.files, None, "disc_index")
     floor = scene.objects["Floor"]
     mat = floor.material_slots[0].material
-    frame = mat.node_tree.nodes[blender_scene.FRAME_NAME]
+    frame = mat.node_tree.nodes[blender.FRAME_NAME]
     tex = next(n for n in mat.node_tree.nodes if n.parent == frame and n.type == "TEX_IMAGE")
     assert tex.image.size[0] == 16 and tex.image.filepath.endswith("Floor.disc_index.exr")
     active = [n for n in mat.node_tree.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output]
@@ -136,9 +136,9 @@ def test_apply_then_revert_restores_materials_exactly(cornell, bpy, tmp_path):
     assert len({o.material_slots[0].material.name for o in objs}) == len(objs)
     assert scene_snapshot(bpy) != before
     for obj in objs:
-        assert blender_scene.revert(obj)
+        assert blender.revert(obj)
     assert scene_snapshot(bpy) == before
-    assert not blender_scene.revert(floor)  # nothing left to undo
+    assert not blender.revert(floor)  # nothing left to undo
 
 
 def _add_light(bpy, kind, **props):
@@ -173,7 +173,7 @@ def test_every_light_type_matches_cycles(empty_blend, bpy, case, direct):
     light.location, light.rotation_euler = location, rotation
     plane_object(bpy, "Receiver", 4.0, (0, 0, 0), material=principled(bpy, "Grey", base=(0.5, 0.5, 0.5)))
     sc = export(bpy, objects=["Receiver"], resolution=32)
-    ref = blender_scene.cycles_bake(empty_blend, ["Receiver"], resolution=32, samples=128, bounces=0)["Receiver"]
+    ref = blender.cycles_bake(empty_blend, ["Receiver"], resolution=32, samples=128, bounces=0)["Receiver"]
     r = compute(sc, BakeSettings(photons=1_000_000, bounces=0, direct=direct, direct_samples=64, denoise=False,
                                  estimator_settings=EstimatorSettings(radius_texels=1.0)))
     m = r.centre_masks["Receiver"]
@@ -196,7 +196,7 @@ def test_contact_shadows_and_corners_match_cycles(cornell, bpy):
     (the shadow rays start a scale-aware epsilon off the surface: no light leaks under the boxes,
     the corners do not go dark). Both sides sample the area light, so texels differ by noise only."""
     sc = export(bpy, objects=["Floor", "BackWall"], resolution=64)
-    ref = blender_scene.cycles_bake(bpy.context.scene, ["Floor", "BackWall"], resolution=64, samples=512,
+    ref = blender.cycles_bake(bpy.context.scene, ["Floor", "BackWall"], resolution=64, samples=512,
                                     bounces=0)
     r = compute(sc, BakeSettings(photons=1000, bounces=0, direct_samples=64, denoise=False))
     for name in ("Floor", "BackWall"):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from blender_helpers import export, plane_object, principled
-from detp_bake import blender_scene
+from detp_bake import blender
 from detp_bake.bake import BakeSettings, compute
 from detp_bake.estimators import EstimatorSettings
 
@@ -73,13 +73,13 @@ def test_a_red_textured_wall_tints_the_floor_as_in_cycles(empty_blend, bpy):
     plane_object(bpy, "Wall", 4.0, (0, 2.0, 2.0), rotation=(np.pi / 2, 0, 0), material=wall)
     _sun(bpy, 3.0, rotation=(np.radians(50), 0, 0))  # travels towards +y: onto the floor and the wall's front
     sc, r = _ours(bpy, ["Floor"], 64, photons=2_000_000, bounces=1)
-    ref = blender_scene.cycles_bake(empty_blend, ["Floor"], resolution=64, samples=256, bounces=1)
+    ref = blender.cycles_bake(empty_blend, ["Floor"], resolution=64, samples=256, bounces=1)
     assert sc.textures is not None and (sc.albedo_texture >= 0).any()
     rows = np.arange(64)[:, None] * np.ones(64)[None, :]
     near_wall = rows >= 52  # lightmap rows towards +y (the wall): the last 75 cm
     # Indirect only: subtract the direct part, which is the same grey in both.
     r0 = compute(sc, BakeSettings(photons=2_000, bounces=0))
-    ref0 = blender_scene.cycles_bake(empty_blend, ["Floor"], resolution=64, samples=64, bounces=0)
+    ref0 = blender.cycles_bake(empty_blend, ["Floor"], resolution=64, samples=64, bounces=0)
     ours = r.images["Floor"] - r0.images["Floor"]
     theirs = ref["Floor"] - ref0["Floor"]
     m = r.centre_masks["Floor"] & near_wall
@@ -118,7 +118,7 @@ def test_cards_let_through_what_cycles_lets_through(empty_blend, bpy, card):
     plane_object(bpy, "Card", 1.0, (0, 0, 0.5), material=mat)
     _sun(bpy, 3.0)
     _, r = _ours(bpy, ["Floor"], 32, photons=200_000, bounces=0)
-    ref = blender_scene.cycles_bake(empty_blend, ["Floor"], resolution=32, samples=128, bounces=0)
+    ref = blender.cycles_bake(empty_blend, ["Floor"], resolution=32, samples=128, bounces=0)
     cols = np.ones(32)[:, None] * np.arange(32)[None, :]
     rows = cols.T
     band = (rows > 13) & (rows < 18)
@@ -176,7 +176,7 @@ def test_hdri_world_on_an_open_plane_and_under_an_overhang(empty_blend, bpy, rot
     plane_object(bpy, "Roof", 1.5, (0.0, 0.0, 0.6), material=principled(bpy, "Grey2", base=(0.5, 0.5, 0.5)))
     _hdri_world(bpy, _sky_image(bpy), strength=1.5, rotation_z=rotation_z)
     sc, r = _ours(bpy, ["Ground"], 32, photons=200_000, bounces=0, direct_samples=64)
-    ref = blender_scene.cycles_bake(empty_blend, ["Ground"], resolution=32, samples=256, bounces=0)
+    ref = blender.cycles_bake(empty_blend, ["Ground"], resolution=32, samples=256, bounces=0)
     assert sc.world_map is not None
     rows, cols = np.mgrid[0:32, 0:32]
     centre = (np.abs(rows - 15.5) < 4) & (np.abs(cols - 15.5) < 4)
@@ -202,6 +202,6 @@ def test_emission_texture_emits_what_cycles_emits(empty_blend, bpy):
     plane_object(bpy, "Receiver", 3.0, (0, 0, 0), material=principled(bpy, "Grey", base=(0.5, 0.5, 0.5)))
     plane_object(bpy, "Panel", 1.0, (0, 0, 1.0), rotation=(np.pi, 0, 0), material=mat)
     _, r = _ours(bpy, ["Receiver"], 16, photons=200_000, bounces=0, direct_samples=64)
-    ref = blender_scene.cycles_bake(empty_blend, ["Receiver"], resolution=16, samples=256, bounces=0)
+    ref = blender.cycles_bake(empty_blend, ["Receiver"], resolution=16, samples=256, bounces=0)
     m = r.centre_masks["Receiver"]
     assert np.isclose(r.images["Receiver"][m].mean(), ref["Receiver"][m].mean(), rtol=0.03)

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from blender_helpers import export
-from detp_bake import blender_scene
+from detp_bake import blender
 from detp_bake.bake import BakeSettings, compute
 from detp_bake.scene import SunLight
 from synthetic import grid, make_scene
@@ -146,7 +146,7 @@ def test_every_object_matches_cycles_outdoors(garden, bpy, direct, tolerance):
     segment, whose discs blur the sun's shadows through the crown)."""
     names = ["Ground", "Wall", "Crown"]
     sc = export(bpy, objects=names, resolution=RESOLUTION)
-    ref = blender_scene.cycles_bake(garden, names, resolution=RESOLUTION, samples=128)
+    ref = blender.cycles_bake(garden, names, resolution=RESOLUTION, samples=128)
     r = compute(sc, BakeSettings(photons=2_000_000, direct=direct))
     # The texels Cycles bakes: centre on a UV triangle, and not skipped (exactly 0).
     masks = {n: r.centre_masks[n] & (ref[n].max(axis=2) > 0.0) for n in names}

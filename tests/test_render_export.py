@@ -95,9 +95,9 @@ def _floor(bpy, size=3.0):
 def _versus_cycles(bpy, settings, samples=32, resolution=32, bounces=0, name="Floor"):
     """Our floor and Cycles' (texels whose centre is on the surface) and the exported scene."""
     from blender_helpers import export
-    from detp_bake import blender_scene
+    from detp_bake import blender
     sc = export(bpy, objects=[name], resolution=resolution)
-    ref = blender_scene.cycles_bake(bpy.context.scene, [name], resolution=resolution, samples=samples,
+    ref = blender.cycles_bake(bpy.context.scene, [name], resolution=resolution, samples=samples,
                                     bounces=bounces)[name]
     r = compute(sc, settings)
     m = r.centre_masks[name]
@@ -375,9 +375,9 @@ def test_instanced_light_colour_temperature_nodes_and_exposure_match_cycles(empt
         inst.location = (x, 0.2, 1.2)
         empty_blend.collection.objects.link(inst)
     from blender_helpers import export
-    from detp_bake import blender_scene
+    from detp_bake import blender
     sc = export(bpy, objects=["Floor"], resolution=32)
-    ref = blender_scene.cycles_bake(empty_blend, ["Floor"], resolution=32, samples=128, bounces=0)["Floor"]
+    ref = blender.cycles_bake(empty_blend, ["Floor"], resolution=32, samples=128, bounces=0)["Floor"]
     r = compute(sc, SUN_ONLY)
     m = r.centre_masks["Floor"]
     ours, theirs = r.images["Floor"][m].mean(axis=0), ref[m].mean(axis=0)
@@ -417,7 +417,7 @@ def test_infinite_power_fails_the_command_line_and_writes_nothing(empty_blend, b
 
 
 def test_flattened_geometry_over_the_budget_names_the_biggest(empty_blend, bpy):
-    from detp_bake import blender_scene
+    from detp_bake import blender
     _floor(bpy)
     props = bpy.data.collections.new("Props")
     _box(bpy, "Box", 0.3, (0, 0, 0), collection=props)
@@ -427,7 +427,7 @@ def test_flattened_geometry_over_the_budget_names_the_biggest(empty_blend, bpy):
         inst.location = (i - 1.0, 0.0, 1.0)
         empty_blend.collection.objects.link(inst)
     _light(bpy, "Sun", "SUN")
-    export = blender_scene.export_scene
+    export = blender.export_scene
     sc = export(empty_blend, None, ["Floor"], log=lambda m: None, max_bytes=38 * 240)
     assert sc.triangle_count == 38
     with pytest.raises(BakeError, match="38 triangles.*the biggest: 'Box' ×1 in 'Inst0' \\(12 triangles\\)"):
@@ -502,8 +502,8 @@ def test_faceless_and_flattened_meshes_get_no_lightmap_and_say_so(cornell, bpy):
     cornell.collection.objects.link(flat)
     bpy.context.view_layer.update()
     said = []
-    from detp_bake import blender_scene
-    sc = blender_scene.export_scene(cornell, None, None, None, 16, said.append)
+    from detp_bake import blender
+    sc = blender.export_scene(cornell, None, None, None, 16, said.append)
     assert {o.name for o in sc.objects if o.bake} == {"Floor", "Ceiling", "BackWall", "LeftWall", "RightWall",
                                                       "ShortBox", "TallBox"}
     line = next(m for m in said if m.startswith("no lightmap"))
@@ -511,4 +511,4 @@ def test_faceless_and_flattened_meshes_get_no_lightmap_and_say_so(cornell, bpy):
     assert sc.object_named("Flat").triangle_count == 4  # the two faces the flattening keeps
     for name, why in (("Loose", "no faces"), ("Flat", "zero scale")):
         with pytest.raises(BakeError, match=f"'{name}' cannot get a lightmap: .*{why}"):
-            blender_scene.export_scene(cornell, None, [name], None, 16, said.append)
+            blender.export_scene(cornell, None, [name], None, 16, said.append)

@@ -11,7 +11,7 @@ sys.path.insert(0, str(ROOT / "sample_scenes"))
 import make_patio  # noqa: E402
 import make_quasi_static  # noqa: E402
 import make_tree  # noqa: E402
-from detp_bake import blender_scene, texels  # noqa: E402
+from detp_bake import blender, texels  # noqa: E402
 
 SCENES = {  # name: (build function, target triangles, mesh objects)
     "tree": (make_tree.build_tree, 72_500, 15),
@@ -63,7 +63,7 @@ def test_saved_scene_is_ready_to_bake(bpy, name):
         uv = _uv(me, "Lightmap")
         assert uv.min() >= 0.0 and uv.max() <= 1.0, obj.name
         assert len(obj.material_slots) == 1
-        albedo, emission = blender_scene.material_albedo_emission(obj.material_slots[0].material)
+        albedo, emission = blender.material_albedo_emission(obj.material_slots[0].material)
         assert np.all((albedo >= 0.2) & (albedo <= 0.8)), (obj.name, albedo)
         assert not emission.any()
     assert scene.render.engine == "CYCLES" and scene.cycles.device == "CPU"
@@ -78,7 +78,7 @@ def test_every_object_gets_texels(bpy, name):
     """The project's own export and rasteriser take the scene as saved (no UVs created)."""
     scene = _open(bpy, name)
     logged = []
-    sc = blender_scene.export_scene(scene, bpy.context.evaluated_depsgraph_get(), None, None, 32,
+    sc = blender.export_scene(scene, bpy.context.evaluated_depsgraph_get(), None, None, 32,
                                     log=logged.append)
     assert not logged  # every "Lightmap" layer was there already
     tx = texels.rasterise(sc)
@@ -163,9 +163,9 @@ def test_quality_rooms_are_saved_as_built(bpy, name):
         assert [layer.name for layer in me.uv_layers] == ["UVMap", "Lightmap"], obj.name
         uv = _uv(me, "Lightmap")
         assert uv.min() >= 0.0 and uv.max() <= 1.0, obj.name
-        albedo, emission = blender_scene.material_albedo_emission(obj.material_slots[0].material)
+        albedo, emission = blender.material_albedo_emission(obj.material_slots[0].material)
         assert np.all((albedo >= 0.2) & (albedo <= 0.8)), (obj.name, albedo)
-    sc = blender_scene.export_scene(scene, bpy.context.evaluated_depsgraph_get(), None, None, 16, log=print)
+    sc = blender.export_scene(scene, bpy.context.evaluated_depsgraph_get(), None, None, 16, log=print)
     assert np.allclose(sc.world, sky, atol=1e-6)
     saved = _snapshot(bpy, scene)
     fresh = _snapshot(bpy, getattr(__import__(module), f"build_{name}")())

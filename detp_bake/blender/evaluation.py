@@ -1,4 +1,4 @@
-"""Blender's render evaluation, read for the exporter (`blender_scene.export_scene`): what F12
+"""Blender's render evaluation, read for the exporter (`blender.export_scene`): what F12
 renders, as shared geometry, one placement per object or instance, and lights.
 
 Python cannot build a render depsgraph, so `render_evaluation` renders a throwaway copy of the

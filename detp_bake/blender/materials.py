@@ -1,7 +1,7 @@
 """Materials as Cycles shades them, reduced to what lightmaps need: diffuse albedo (a constant times
 an optional image), opacity (a constant times an optional image's alpha), emitted radiance.
 
-Part of the Blender adapter (it reads node trees and images; blender_scene.py calls it). The graph
+Part of the Blender adapter (it reads node trees and images; export.py calls it). The graph
 is read from the active Cycles output: Principled, Diffuse, Emission, Transparent, and Mix or Add
 Shader over them. A colour socket may be a constant, an Image Texture (through a UV Map node or the
 render UV map), a Color Attribute, or one of these through Mix/MixRGB (multiply or mix with a
