@@ -35,8 +35,8 @@ import numpy as np
 
 from .errors import BakeCancelled, BakeError
 from .lights import _spot_att, emissive_triangles
-from .sampling import (cone_lobe, cosine_hemisphere, in_frame, jit, orthonormal_basis, photon_rng, search_cdf,
-                       seed_key, uniform2, uniform_disc, uniform_triangle)
+from .sampling import (cone_lobe, cosine_hemisphere, in_frame, inline, jit, orthonormal_basis, photon_rng,
+                       search_cdf, seed_key, uniform2, uniform_disc, uniform_triangle)
 from .environment import environment_rays
 from .scattering import MAX_PASSES
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
@@ -154,6 +154,18 @@ def _radical_inverse2(j):
     return np.float64(x) * (1.0 / 4294967296.0)
 
 
+@inline
+def _towards(sx, sy, sz, nx, ny, nz):
+    """The unit direction to a point at offset (sx, sy, sz), its squared distance and distance, and
+    its cosine with the normal n; all 0 when the offset is 0."""
+    d2 = sx * sx + sy * sy + sz * sz
+    if d2 <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    dist = math.sqrt(d2)
+    dx, dy, dz = sx / dist, sy / dist, sz / dist
+    return dx, dy, dz, d2, dist, dx * nx + dy * ny + dz * nz
+
+
 @jit
 def _shadow_rays(kind, prm, samples, key, a, b, pos, nrm, geo, eps,
                  cdf, tpos, tnrm, trad, o, d, t, w, owner):
@@ -232,15 +244,11 @@ def _shadow_rays(kind, prm, samples, key, a, b, pos, nrm, geo, eps,
                     lx, ly = 0.5 * prm[15] * qx, 0.5 * prm[16] * qy
                 else:
                     lx, ly = (u0 - 0.5) * prm[15], (u1 - 0.5) * prm[16]
-                sx = prm[0] * lx + prm[1] * ly + prm[3] - ox
-                sy = prm[4] * lx + prm[5] * ly + prm[7] - oy
-                sz = prm[8] * lx + prm[9] * ly + prm[11] - oz
-                d2 = sx * sx + sy * sy + sz * sz
+                dx, dy, dz, d2, dist, cos_x = _towards(prm[0] * lx + prm[1] * ly + prm[3] - ox,
+                                                       prm[4] * lx + prm[5] * ly + prm[7] - oy,
+                                                       prm[8] * lx + prm[9] * ly + prm[11] - oz, nx, ny, nz)
                 if d2 <= 0.0:
                     continue
-                dist = math.sqrt(d2)
-                dx, dy, dz = sx / dist, sy / dist, sz / dist
-                cos_x = dx * nx + dy * ny + dz * nz
                 cos_l = -(dx * prm[12] + dy * prm[13] + dz * prm[14])
                 if cos_x <= 0.0 or cos_l <= 0.0:
                     continue
@@ -253,15 +261,12 @@ def _shadow_rays(kind, prm, samples, key, a, b, pos, nrm, geo, eps,
                 v0 = (u0 - below) / max(cdf[lo] - below, 1e-300)
                 v0 = min(max(v0, 0.0), 0.999999999)
                 b0, b1, b2 = uniform_triangle(v0, u1)
-                sx = b0 * tpos[lo, 0, 0] + b1 * tpos[lo, 1, 0] + b2 * tpos[lo, 2, 0] - ox
-                sy = b0 * tpos[lo, 0, 1] + b1 * tpos[lo, 1, 1] + b2 * tpos[lo, 2, 1] - oy
-                sz = b0 * tpos[lo, 0, 2] + b1 * tpos[lo, 1, 2] + b2 * tpos[lo, 2, 2] - oz
-                d2 = sx * sx + sy * sy + sz * sz
+                dx, dy, dz, d2, dist, cos_x = _towards(
+                    b0 * tpos[lo, 0, 0] + b1 * tpos[lo, 1, 0] + b2 * tpos[lo, 2, 0] - ox,
+                    b0 * tpos[lo, 0, 1] + b1 * tpos[lo, 1, 1] + b2 * tpos[lo, 2, 1] - oy,
+                    b0 * tpos[lo, 0, 2] + b1 * tpos[lo, 1, 2] + b2 * tpos[lo, 2, 2] - oz, nx, ny, nz)
                 if d2 <= 0.0:
                     continue
-                dist = math.sqrt(d2)
-                dx, dy, dz = sx / dist, sy / dist, sz / dist
-                cos_x = dx * nx + dy * ny + dz * nz
                 cos_l = abs(dx * tnrm[lo, 0] + dy * tnrm[lo, 1] + dz * tnrm[lo, 2])
                 if cos_x <= 0.0 or cos_l <= 0.0:
                     continue
