@@ -124,10 +124,7 @@ class DETPBAKE_OT_bake(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if DETPBAKE_OT_bake._running:
-            cls.poll_message_set("a bake is running: wait for it or press Esc")
-            return False
-        return context.scene is not None
+        return common.idle(cls, context)
 
     def _prepare(self, context):
         job = BakeJob(context)

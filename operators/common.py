@@ -62,3 +62,13 @@ def export(context, objects, log, created=None):
                 sl = obj.triangles
                 obj.resolution = texels.resolution_for_density(scene.positions[sl], scene.uvs[sl], s.texel_density)
     return scene
+
+
+def idle(cls, context) -> bool:
+    """The poll of every operator that bakes: one bake at a time per Blender session (two would
+    share numba's thread pool), saying why when one runs."""
+    from .bake import DETPBAKE_OT_bake
+    if DETPBAKE_OT_bake._running:
+        cls.poll_message_set("a bake is running: wait for it or press Esc")
+        return False
+    return context.scene is not None

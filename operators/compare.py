@@ -110,11 +110,7 @@ class DETPBAKE_OT_compare(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        from .bake import DETPBAKE_OT_bake
-        if DETPBAKE_OT_bake._running:
-            cls.poll_message_set("a bake is running: wait for it or press Esc")
-            return False
-        return context.scene is not None
+        return common.idle(cls, context)
 
     def invoke(self, context, event):
         self.estimators = set(context.scene.detp_bake.compare_estimators)
