@@ -28,7 +28,7 @@ import sys
 import bpy
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from make_cornell_box import add_lightmap_uv  # noqa: E402
+from make_cornell_box import add_lightmap_uv, add_object as cornell_add_object  # noqa: E402
 from make_patio import box, quad_grid  # noqa: E402
 from make_tree import (MeshBuilder, generate, add_camera, make_material,  # noqa: E402
                        set_render, set_world)
@@ -50,13 +50,8 @@ SQUARES = [(0.0, 0.0), (3.0, 0.0), (0.0, 3.0)]  # lower-left corners of the floo
 
 
 def add_object(name, builder, material, location=(0.0, 0.0, 0.0), rot_z_deg=0.0):
-    mesh = builder.mesh(name)
-    mesh.materials.append(material)
-    obj = bpy.data.objects.new(name, mesh)
-    obj.location = location
-    obj.rotation_euler = (0.0, 0.0, math.radians(rot_z_deg))
-    bpy.context.scene.collection.objects.link(obj)
-    return obj
+    """A new object from `builder`, placed; its Lightmap layer comes later (add_lightmap_uv)."""
+    return cornell_add_object(name, builder.mesh(name), material, location, rot_z_deg)
 
 
 def build_l_room():

@@ -34,6 +34,7 @@ import bpy
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from make_cornell_box import add_lightmap_uv  # noqa: E402
+from make_tree import add_object as make_tree_add_object  # noqa: E402
 from make_patio import box, quad_grid  # noqa: E402
 from make_tree import (MeshBuilder, generate, add_camera, add_sun, make_material,  # noqa: E402
                        set_render, set_world)
@@ -56,11 +57,8 @@ DEFAULT_OUTPUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "windo
 
 
 def add_object(name, builder, material):
-    mesh = builder.mesh(name)
-    mesh.materials.append(material)
-    obj = bpy.data.objects.new(name, mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    return obj
+    """A new object from `builder`; its Lightmap layer comes later (add_lightmap_uv)."""
+    return make_tree_add_object(name, builder, material, lightmap=False)
 
 
 def add_light(scene, name, kind, location, energy, rotation=(0.0, 0.0, 0.0), **props):
