@@ -36,7 +36,6 @@ read it at its centre, which moves the means of objects crossed by straight shad
 from __future__ import annotations
 
 import argparse
-import contextlib
 import hashlib
 import json
 import os
@@ -59,21 +58,6 @@ MODES = ("sampled", "photons")  # ours: the default (shadow rays + estimator) an
 SEEDS = (1, 2)
 
 
-@contextlib.contextmanager
-def quiet_stdout():
-    """Cycles writes a line per object and phase to fd 1 from C: silence it while it bakes."""
-    sys.stdout.flush()
-    saved, null = os.dup(1), os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(null, 1)
-        yield
-    finally:
-        sys.stdout.flush()
-        os.dup2(saved, 1)
-        os.close(null)
-        os.close(saved)
-
-
 def cycles_references(bpy, scene_name, names, resolution, spp, direct_spp, cache: Path, log):
     """{"full": [half_a, half_b], "direct": [half_a, half_b]}, each half {object: (H, W, 3)}, and
     the seconds spent baking (None when cached)."""
@@ -93,7 +77,7 @@ def cycles_references(bpy, scene_name, names, resolution, spp, direct_spp, cache
     for part, samples, bounces in (("full", spp, None), ("direct", direct_spp, 0)):
         refs[part] = []
         for seed in SEEDS:
-            with quiet_stdout():
+            with scenes.quiet_stdout():
                 refs[part].append(blender.cycles_bake(bpy.context.scene, names, resolution=resolution,
                                                             samples=max(1, samples // len(SEEDS)),
                                                             bounces=bounces, seed=seed))

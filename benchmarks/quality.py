@@ -43,7 +43,6 @@ under --figures when given.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import hashlib
 import json
 import os
@@ -105,23 +104,6 @@ def label(method: str) -> str:
             "photons": f"`{name}`: photons only (paper's mode), raw"}[variant]
 
 
-@contextlib.contextmanager
-def quiet_stdout():
-    """Cycles prints a line per object and phase to the process's stdout (fd 1, from C): send it
-    to /dev/null while a bake runs."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    null = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(null, 1)
-        yield
-    finally:
-        sys.stdout.flush()
-        os.dup2(saved, 1)
-        os.close(null)
-        os.close(saved)
-
-
 def timed(fn):
     """fn() with its wall seconds and process CPU seconds (all threads: Cycles', numba's, OIDN's)."""
     w0, c0 = time.perf_counter(), time.process_time()
@@ -133,7 +115,7 @@ def cycles(bpy, blender, names, resolution, spp, seed):
     # Cycles' bake jitters its sample points uniformly over the texel, whatever the film's pixel
     # filter (measured: a 1-px box and the default 1.5-px Blackman-Harris bake the same bytes):
     # the same footprint as ours, the texel's covered square.
-    with quiet_stdout():
+    with scenes.quiet_stdout():
         return blender.cycles_bake(bpy.context.scene, names, resolution=resolution, samples=spp, seed=seed)
 
 
@@ -456,7 +438,7 @@ def _denoise_node(bpy, color, albedo):
     scene.render.filepath = str(path)
     scene.render.image_settings.file_format = "OPEN_EXR"
     scene.render.image_settings.color_depth = "32"
-    with quiet_stdout():
+    with scenes.quiet_stdout():
         bpy.ops.render.render(scene=scene.name, write_still=True)
     return np.ascontiguousarray(oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT)[::-1, :, :3])
 

@@ -2,6 +2,7 @@
 deterministic ~100k-triangle room built with numpy alone."""
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import tempfile
@@ -120,3 +121,20 @@ def dense_room(triangles: int = 100_000) -> Scene:
     return Scene(positions=pos, normals=np.repeat(n[:, None], 3, axis=1), uvs=np.concatenate(uvs),
                  albedo=np.concatenate(alb), emission=np.zeros((len(pos), 3)), objects=objs,
                  lights=lights, default_bounces=4)
+
+
+@contextlib.contextmanager
+def quiet_stdout():
+    """Cycles prints a line per object and phase to the process's stdout (fd 1, from C): send it
+    to /dev/null while a bake runs."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, 1)
+        os.close(null)
+        os.close(saved)
