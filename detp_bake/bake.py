@@ -22,6 +22,7 @@ from . import __version__, denoise as denoise_mod, direct as direct_mod, estimat
 from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
+from .estimators.discs import SLAB, disc_radius
 from .photons import PhotonTracer, RayCaster, TraceStats
 from .scene import Scene
 
@@ -222,10 +223,9 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
     rasterise_seconds = time.perf_counter() - t0
     # DETP discs reach past a surface's edge by their radius and count what passes there: sun
     # photons must start that far beyond the footprint of the geometry too.
-    reach = 0.0
-    if any(name != "photon_map" for name in names) and len(texels):
-        from .estimators.discs import disc_radius
-        reach = float(np.max(disc_radius(texels, settings.estimator_settings)))
+    discs = any(name != "photon_map" for name in names)
+    radius = disc_radius(texels, settings.estimator_settings) if discs else None
+    reach = float(np.max(radius)) if discs and len(texels) else 0.0
     caster = RayCaster(scene.positions)
     tracer = PhotonTracer(scene, settings.photons, bounces, settings.seed, batch_size, settings.threads,
                           indirect_only=sampled, caster=caster, margin=reach)
@@ -247,10 +247,8 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
     expected_segments = int(tracer.photons * per_photon_kept)
     clearance = None
     t0 = time.perf_counter()
-    if any(name != "photon_map" for name in names):
+    if discs:
         report(Progress("prepare", 0.0, "Measuring disc clearance"))
-        from .estimators.discs import SLAB, disc_radius
-        radius = disc_radius(texels, settings.estimator_settings)
         clearance = texels_mod.tangent_clearance(texels, scene.positions, radius, 0.5 * SLAB * radius)
     clearance_seconds = time.perf_counter() - t0
     context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
@@ -265,7 +263,7 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
     # Noise from the spread between groups of batches, for the estimators that stream (a group
     # closes once an estimator has consumed everything it was given).
     noise = {name: BatchNoise(len(texels)) for name, est in runs.items() if est.streaming}
-    since = {name: 0 for name in noise}
+    since = {name: 0 for name in noise}  # segments since each one's last reading
     primary = names[0]
     total = tracer.photons
     stopped_by = "photons"
@@ -275,11 +273,11 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
         for name, est in runs.items():
             t1 = time.perf_counter()
             est.add(batch)
-            since.setdefault(name, 0)
-            since[name] += batch.segment_count
-            if name in noise and since[name] >= min(est.group_segments, expected_segments // 16):
-                noise[name].update(est.finish().irradiance, tracer.share)
-                since[name] = 0
+            if name in noise:
+                since[name] += batch.segment_count
+                if since[name] >= min(est.group_segments, expected_segments // 16):
+                    noise[name].update(est.finish().irradiance, tracer.share)
+                    since[name] = 0
             spent[name] += time.perf_counter() - t1
         done = tracer.stats.photons
         message = f"Tracing {_si(done)}/{_si(total)} photons"
@@ -305,7 +303,7 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
     for name, est in runs.items():
         t1 = time.perf_counter()
         out = est.finish()
-        if name in noise and since.get(name, 0) > 0:
+        if name in noise and since[name] > 0:
             noise[name].update(out.irradiance, share)
         if share < 1.0:  # stopped early: the batches so far stand for the whole bake
             out.irradiance = out.irradiance / share
