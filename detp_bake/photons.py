@@ -430,8 +430,9 @@ class PhotonTracer:
         st.embree_seconds += time.perf_counter() - t0
         st.prim[a:b] = r["primID"]
         st.ng[a:b] = r["Ng"]
-        st.bu[a:b] = r["u"]
-        st.bv[a:b] = r["v"]
+        if self.surfaces.textured or self.surfaces.cutout:  # barycentrics are read for textures only
+            st.bu[a:b] = r["u"]
+            st.bv[a:b] = r["v"]
         st.through[a:b] = False
 
     def _pass_cutouts(self, st: _Stream, s: int, e: int) -> int:
