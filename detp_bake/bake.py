@@ -23,6 +23,7 @@ from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
 from .estimators.discs import SLAB, disc_radius
+from .estimators.rise import own_surface_rise
 from .photons import PhotonTracer, RayCaster, TraceStats
 from .scene import Scene
 
@@ -245,14 +246,15 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
         report(Progress("estimate", fraction, f"Estimating {100 * fraction:.0f} %"))
 
     expected_segments = int(tracer.photons * per_photon_kept)
-    clearance = None
+    clearance = rise = None
     t0 = time.perf_counter()
     if discs:
         report(Progress("prepare", 0.0, "Measuring disc clearance"))
         clearance = texels_mod.tangent_clearance(texels, scene.positions, radius, 0.5 * SLAB * radius)
+        rise = own_surface_rise(texels, scene, radius)
     clearance_seconds = time.perf_counter() - t0
     context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
-                                 clearance=clearance)
+                                 clearance=clearance, rise=rise)
     runs, build = {}, {}
     for name in names:
         report(Progress("prepare", 0.5, f"Preparing {name}"))
@@ -344,7 +346,9 @@ def _finish(settings, bounces, texels, est, tracer, seconds, direct_e=None, dire
         raw = texels_mod.dilate(img, mask, settings.margin)
         if denoise:
             raw_images[lm.name] = raw
-            result_images[lm.name] = denoise_mod.denoise_lightmap(img, mask, margin=settings.margin)
+            area, _ = texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)
+            result_images[lm.name] = denoise_mod.denoise_lightmap(img, mask, margin=settings.margin,
+                                                                  weights=area[..., 0])
         else:
             result_images[lm.name] = raw
         masks[lm.name] = mask

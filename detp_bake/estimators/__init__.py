@@ -40,6 +40,7 @@ class Context:
     scene_radius: float = 1.0
     expected_segments: int = 0  # an estimate made before tracing, for work limits
     clearance: Optional[np.ndarray] = None  # per texel, free distance in its tangent plane (DETP discs)
+    rise: Optional[np.ndarray] = None  # per texel, its own surface's height in front of its disc (rise.py)
 
 
 @dataclass
