@@ -26,6 +26,7 @@ from ..texels import TexelSet
 
 SLAB = 0.25  # δ as a fraction of r, at most
 FLAT_SLAB = 0.02  # δ over the texel's own surface rise, as a fraction of r
+RISE_STEP = 0.01  # the rise is rounded up to steps of this fraction of r
 KERNELS = {"constant": 0, "epanechnikov": 1}
 
 
@@ -78,7 +79,14 @@ def make_discs(texels: TexelSet, settings, scene_radius: float, clearance=None, 
     if not np.all(radius > 0):
         raise BakeError("disc radius is zero: a lightmap has no texel area (check its UVs)")
     eps = 1e-6 * max(scene_radius, 1e-3)
-    slab = SLAB * radius if rise is None else np.minimum(SLAB * radius, rise + FLAT_SLAB * radius)
+    if rise is None:
+        slab = SLAB * radius
+    else:
+        # In steps of r/100, rounded up, with float noise on flat surfaces taken as flat: the discs
+        # of a flat chart keep one slab, which lattice patches (patches.py) need to take them in.
+        step = RISE_STEP * radius
+        steps = np.ceil(np.maximum(np.asarray(rise, np.float64) - 1e-4 * radius, 0.0) / step)
+        slab = np.minimum(SLAB * radius, steps * step + FLAT_SLAB * radius)
     return Discs(np.ascontiguousarray(texels.position, np.float64),
                  np.ascontiguousarray(texels.normal, np.float64),
                  radius.astype(np.float64), slab.astype(np.float64), eps, KERNELS[settings.kernel])
