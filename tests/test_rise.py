@@ -46,7 +46,22 @@ def test_inside_a_sphere_the_rise_is_what_the_curvature_gives():
 
 
 def test_texels_sparser_than_the_disc_keep_the_full_slab():
-    sc = make_scene([("Plate", grid(1.0, 1.0, 2), 0.5, True)], LAMP, resolution=4)
+    """On a piece of more than SMALL_PIECE vertices, too few texels say nothing: inf."""
+    sc = make_scene([("Plate", grid(1.0, 1.0, 8), 0.5, True)], LAMP, resolution=4)
     texels = rasterise(sc)
     rise = own_surface_rise(texels, sc, np.full(len(texels), 0.05))  # texels are 0.25 m apart
     assert np.isinf(rise).all()
+
+
+def test_a_leaf_smaller_than_its_disc_is_measured_from_its_vertices():
+    """A leaf card of a texel or two has no texel of its own around its disc: its vertices say
+    it is flat (a folded one rises by its fold)."""
+    flat = grid(0.1, 0.05, 1, z=1.0)
+    folded = grid(0.1, 0.05, 2, z=2.0)
+    folded[0][:, :, 2] += np.where(np.abs(folded[0][:, :, 0]) > 0.04, 0.01, 0.0)  # edges bent up 1 cm
+    sc = make_scene([("Flat", flat, 0.5, True), ("Folded", folded, 0.5, True)], LAMP, resolution=2)
+    texels = rasterise(sc)
+    rise = own_surface_rise(texels, sc, np.full(len(texels), 0.3))
+    flat_lm, folded_lm = texels.lightmaps
+    assert np.allclose(rise[flat_lm.texels], 0.0, atol=1e-7)
+    assert np.all(rise[folded_lm.texels] > 0.004)
