@@ -127,7 +127,9 @@ def test_install_bake_disable_uninstall(bpy, built_zip, tmp_path):
     assert {"embreex", "numba", "llvmlite", "OpenImageIO"} <= set(r["imported_by_bake"])
     for name, path in r["module_files"].items():  # from the bundled wheels, nowhere else
         assert any(path.startswith(sp) for sp in r["wheel_site_packages"]), (name, path)
-    assert Path(r["numba_cache_dir"]) == Path(r["numba_user_path"]), "numba's cache must be the extension's user folder"
+    # numba's cache: the extension's user folder, one subfolder per state of the core's sources.
+    assert Path(r["numba_cache_dir"]).parent == Path(r["numba_user_path"]), r["numba_cache_dir"]
+    assert len(Path(r["numba_cache_dir"]).name) == 12
     assert r["numba_cache_files"] > 0
 
     assert r["disable"] == ["FINISHED"]
