@@ -133,6 +133,7 @@ class BakeResult:
     memory: dict = field(default_factory=dict)  # the estimate made before work, and the peak used
     export: dict = field(default_factory=dict)  # what the exporter found (instances, triangles, textures, …)
     raw_images: dict = field(default_factory=dict)  # object name -> image before denoising (when denoised)
+    cluster: dict = field(default_factory=dict)  # where the photons were traced when not here (distributed.py)
     warnings: list = field(default_factory=list)
     stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit
     share: float = 1.0  # the share of the photons traced (less than 1 when stopped early)
@@ -163,6 +164,7 @@ class BakeResult:
             "memory": self.memory,
             "export": self.export,
             "denoised": bool(self.raw_images),
+            **({"cluster": self.cluster} if self.cluster else {}),
             "warnings": list(self.warnings),
             "seconds": self.seconds,
         }
@@ -271,7 +273,10 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None) -> dic
     current = {}
     totals = Totals(names)
 
+    shown = [0]
+
     def trace_progress(photons):
+        photons = shown[0] = max(shown[0], photons)  # units may finish out of order
         message = f"Tracing {_si(photons)}/{_si(total)} photons"
         if current:
             message += f" · noise {100 * max(current.values(), default=0.0):.2g} %"
@@ -331,6 +336,7 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None) -> dic
         result.stopped_by = stopped_by
         result.share = share
         result.export = dict(getattr(scene, "export_stats", None) or {})
+        result.cluster = dict(cluster.last) if cluster is not None else {}
         result.memory = {"estimate_mb": round(need.total / 1e6, 1),
                          "parts_mb": {k: round(v / 1e6, 1) for k, v in need.parts.items()},
                          "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": batch_size}
