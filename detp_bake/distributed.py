@@ -207,7 +207,8 @@ class Cluster:
 
 
 def _failure(future, unit) -> str:
-    what = f"batches {unit[0][0]}–{unit[-1][-1]}"
+    first, last = unit[0][0], unit[-1][-1]
+    what = f"batch {first}" if first == last else f"batches {first}–{last}"
     if future.status == "error":
         exc = future.exception()
         if type(exc).__name__ == "KilledWorker":

@@ -1,0 +1,122 @@
+"""Bakes on a Dask cluster (distributed.py): identical to a local bake whatever the workers do,
+a dead worker's units run again, a failing unit and an unreachable scheduler said plainly.
+One LocalCluster of two worker processes serves the whole module."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("distributed")
+
+from conftest import CORNELL, ROOT  # noqa: E402
+from detp_bake import texels as texels_mod  # noqa: E402
+from detp_bake.bake import BakeSettings, Progress, TraceJob, compute  # noqa: E402
+from detp_bake.cli import main  # noqa: E402
+from detp_bake.distributed import Cluster  # noqa: E402
+from detp_bake.errors import BakeError  # noqa: E402
+from detp_bake.estimators import Context, EstimatorSettings  # noqa: E402
+from detp_bake.scene import PointLight  # noqa: E402
+from synthetic import make_scene, uv_sphere  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with Cluster(workers=2) as c:
+        yield c
+
+
+def _sphere():
+    return make_scene([("Sphere", uv_sphere(1.0, 24, 48, inward=True), 0.5, True)],
+                      [PointLight("Lamp", np.zeros(3), np.full(3, 100.0))], resolution=32)
+
+
+def _settings(name, photons=200_000):
+    return BakeSettings(estimator=name, photons=photons, bounces=3, batch_size=20_000, denoise=False,
+                        estimator_settings=EstimatorSettings(radius=0.1))
+
+
+def _same(a, b):
+    assert np.array_equal(a.value, b.value)
+    for name in a.images:
+        assert np.array_equal(a.images[name], b.images[name])
+    ra, rb = a.report(), b.report()
+    for key in ("photons", "segments", "hits", "flux", "noise"):
+        assert ra[key] == rb[key], key
+
+
+def test_a_local_bake_imports_no_dask():
+    code = ("import sys, detp_bake.bake, detp_bake.cli, detp_bake.distributed, detp_bake.estimators as e; "
+            "e.names(); bad = [m for m in sys.modules if m.split('.')[0] in ('dask', 'distributed')]; "
+            "assert not bad, bad")
+    proc = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, PYTHONPATH=str(ROOT)),
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+
+
+@pytest.mark.parametrize("name", ["disc_index", "sphere_cache", "photon_map"])
+def test_two_workers_bake_exactly_what_one_process_bakes(cluster, name):
+    sc = _sphere()
+    local = compute(sc, _settings(name))
+    far = compute(sc, _settings(name), cluster=cluster)
+    _same(local, far)
+    assert far.cluster["workers"] == 2 and far.cluster["units"] >= 3 and far.cluster["resubmitted"] == 0
+    assert "cluster" in far.report() and "cluster" not in local.report()
+
+
+def test_a_killed_worker_loses_only_its_units(cluster):
+    """SIGKILL to the worker that just took a unit: the scheduler runs the unit again elsewhere,
+    the lightmap is the same bit for bit and the report counts the unit."""
+    sc, settings = _sphere(), _settings("disc_index", 400_000)
+    local = compute(sc, settings)
+    client = cluster.client
+    pids = client.run(os.getpid)
+    killed = []
+
+    def progress(p: Progress):
+        if p.phase == "trace" and not killed:
+            busy = {a: max(int(k.rsplit("-", 1)[1]) for k in keys) for a, keys in client.processing().items() if keys}
+            if busy:
+                victim = max(busy, key=busy.get)
+                os.kill(pids[victim], signal.SIGKILL)
+                killed.append(victim)
+    far = compute(sc, settings, progress, cluster=cluster)
+    assert killed
+    _same(local, far)
+    assert far.cluster["resubmitted"] >= 1
+    client.wait_for_workers(2, timeout=60)  # the nanny starts a new one: the module goes on with two
+
+
+def test_a_failing_unit_stops_the_bake_with_the_workers_message(cluster):
+    sc = _sphere()
+    job = TraceJob(sc, texels_mod.rasterise(sc), _settings("disc_index"), ["no_such_estimator"], 1, 20_000, 0.0,
+                   Context())
+    t0 = time.perf_counter()
+    with pytest.raises(BakeError, match=r"batch [01]\) failed on worker tcp://.*unknown estimator 'no_such_estimator'"):
+        list(cluster.partials(job, [range(0, 1), range(1, 2)], lambda: False, lambda n: None, (0, 0)))
+    assert time.perf_counter() - t0 < 30
+
+
+def test_an_unreachable_scheduler_fails_fast_naming_the_address(capsys, tmp_path):
+    t0 = time.perf_counter()
+    code = main(["bake", str(CORNELL), "--out", str(tmp_path), "--scheduler", "tcp://127.0.0.1:9",
+                 "--connect-timeout", "1"])
+    err = capsys.readouterr().err
+    assert code == 2 and "could not reach the scheduler at tcp://127.0.0.1:9 within 1 s" in err, err
+    assert time.perf_counter() - t0 < 15
+    assert not list(tmp_path.iterdir())
+
+
+def test_the_cli_through_a_scheduler_writes_the_same_files(cluster, tmp_path, bpy):
+    args = ["bake", str(CORNELL), "--objects", "Floor", "TallBox", "--photons", "60000", "--resolution", "16",
+            "--no-denoise"]
+    assert main(args + ["--out", str(tmp_path / "here")]) == 0
+    assert main(args + ["--out", str(tmp_path / "far"), "--scheduler", cluster.address]) == 0
+    for name in ("Floor.disc_index.exr", "TallBox.disc_index.exr"):
+        assert (tmp_path / "here" / name).read_bytes() == (tmp_path / "far" / name).read_bytes()
+    report = json.loads((tmp_path / "far" / "report.json").read_text())
+    assert report["cluster"]["workers"] == 2 and report["cluster"]["address"] == cluster.address
