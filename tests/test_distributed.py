@@ -120,3 +120,25 @@ def test_the_cli_through_a_scheduler_writes_the_same_files(cluster, tmp_path, bp
         assert (tmp_path / "here" / name).read_bytes() == (tmp_path / "far" / name).read_bytes()
     report = json.loads((tmp_path / "far" / "report.json").read_text())
     assert report["cluster"]["workers"] == 2 and report["cluster"]["address"] == cluster.address
+
+
+def test_the_preferences_button_reports_the_workers_and_their_cores(cluster, bpy, capfd, monkeypatch):
+    from test_addon import PACKAGE, _import_addon
+    module = _import_addon()
+    module.register()
+    entry = bpy.context.preferences.addons.new()
+    entry.module = PACKAGE
+    try:
+        prefs = bpy.context.preferences.addons[PACKAGE].preferences
+        prefs.scheduler_address = cluster.address
+        capfd.readouterr()
+        assert bpy.ops.detp_bake.test_cluster() == {"FINISHED"}
+        said = capfd.readouterr()
+        assert f"{cluster.address}: 2 workers, 2 cores" in said.out + said.err, said
+        prefs.scheduler_address = "tcp://127.0.0.1:9"
+        monkeypatch.setattr(sys.modules["detp_bake_addon.ui.preferences"], "CONNECT_TIMEOUT", 1.0)
+        with pytest.raises(RuntimeError, match="could not reach the scheduler at tcp://127.0.0.1:9"):
+            bpy.ops.detp_bake.test_cluster()
+    finally:
+        bpy.context.preferences.addons.remove(entry)
+        module.unregister()
