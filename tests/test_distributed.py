@@ -142,3 +142,70 @@ def test_the_preferences_button_reports_the_workers_and_their_cores(cluster, bpy
     finally:
         bpy.context.preferences.addons.remove(entry)
         module.unregister()
+
+
+def test_cancel_cancels_the_units_still_out_and_writes_nothing(cluster, tmp_path):
+    from detp_bake.bake import bake
+    from detp_bake.errors import BakeCancelled
+    import threading
+    cancel = threading.Event()
+
+    def progress(p: Progress):
+        if p.phase == "trace":
+            cancel.set()
+    with pytest.raises(BakeCancelled):
+        bake(_sphere(), _settings("disc_index", 400_000), tmp_path, progress, cancel, cluster=cluster)
+    assert not list(tmp_path.iterdir())
+    left = None
+    for _ in range(50):
+        left = cluster.client.run_on_scheduler(
+            lambda dask_scheduler=None: [k for k, t in dask_scheduler.tasks.items()
+                                         if "detp_bake-unit" in str(k) and t.state in ("processing", "queued", "no-worker")])
+        if not left:
+            break
+        time.sleep(0.1)
+    assert not left
+
+
+def test_units_are_sized_by_the_workers_memory_limit(cluster):
+    limit = cluster.describe()["memory_limit"]
+    blocks = [range(b, b + 1) for b in range(60)]
+    assert [len(u) for u in cluster._units(blocks, (0, 1))] == [10] * 6  # three per worker thread
+    per_block = int(0.1 * limit)
+    units = cluster._units(blocks, (int(0.6 * limit) - int(2.5 * per_block), per_block))
+    assert max(len(u) for u in units) == 2 and sum(len(u) for u in units) == 60
+    with pytest.raises(BakeError, match=r"memory limit of worker tcp://"):
+        cluster._units(blocks, (int(0.6 * limit), per_block))
+
+
+def test_the_core_uploaded_to_a_worker_imports_without_blender(tmp_path):
+    from detp_bake.distributed import core_bootstrap
+    source, digest = core_bootstrap()
+    (tmp_path / "boot.py").write_text(source)
+    code = ("import sys, boot, detp_bake.distributed, detp_bake.bake, os; "
+            "assert detp_bake.__file__.startswith(boot._HOME), detp_bake.__file__; "
+            "assert not os.path.exists(os.path.join(boot._HOME, 'detp_bake', 'blender')); "
+            "assert 'bpy' not in sys.modules")
+    env = dict(os.environ, PYTHONPATH=str(tmp_path), TMPDIR=str(tmp_path))
+    proc = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / f"detp_bake_core_{digest}" / "detp_bake" / "photons.py").is_file()
+
+
+def test_classes_travel_by_their_core_name_from_blenders_package_path(monkeypatch):
+    """In Blender the core is bl_ext.<repo>.detp_bake.detp_bake: what the client pickles must
+    name detp_bake.… for workers that have the core alone."""
+    import pickle
+    from detp_bake import distributed, scene
+    prefix = "bl_ext.user_default.detp_bake.detp_bake"
+    monkeypatch.setattr(distributed, "_PREFIX", prefix)
+    stand_in = type("BakeObject", (), {"__module__": prefix + ".scene"})
+
+    def run_unit():
+        pass
+    run_unit.__module__, run_unit.__qualname__ = prefix + ".distributed", "run_unit"
+    data = distributed._dumps({"object": stand_in, "function": run_unit, "run": distributed._by_name(run_unit)})
+    assert b"bl_ext" not in data
+    back = pickle.loads(data)
+    assert back["object"] is scene.BakeObject
+    assert back["function"] is distributed.run_unit and back["run"] is distributed.run_unit
