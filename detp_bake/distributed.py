@@ -35,6 +35,9 @@ from .errors import BakeCancelled, BakeError
 
 CONNECT_TIMEOUT = 10.0  # seconds to reach the scheduler and see a worker
 UNITS_PER_SLOT = 3  # units per worker thread: small enough to balance, large enough to amortise
+MAX_UNIT_BATCHES = 16  # batches in a unit: a few seconds of one core
+EARLY_STOP_UNIT_BATCHES = 4  # for bakes that may stop early (noise target, time limit): little traced in vain
+AHEAD_PER_SLOT = 2  # units submitted ahead of the one the client adds next, per worker thread
 MEMORY_SHARE = 0.6  # of a worker's memory limit a unit may plan to use
 CORE = "detp_bake"  # the core's package name on the workers
 _PREFIX = __name__.rpartition(".")[0]  # the core's package name here ("detp_bake" or bl_ext.….detp_bake)
@@ -135,7 +138,7 @@ class Cluster:
         from .bake import Partial
         client = self.client
         token = uuid.uuid4().hex[:12]
-        units = self._units(blocks, worker_bytes)
+        units = self._units(blocks, worker_bytes, bool(job.settings.target_noise or job.settings.time_limit))
         info = client.scheduler_info(n_workers=-1)["workers"]
         slots = {}
         for address, w in info.items():
@@ -143,47 +146,56 @@ class Cluster:
             slots[host] = slots.get(host, 0) + w.get("nthreads", 1)
         [payload] = client.scatter([_dumps(job)], broadcast=True, hash=False)
         run = _by_name(run_unit)
-        futures = [client.submit(run, f"job-{token}", payload, [(b[0], b[-1] + 1) for b in unit], slots,
-                                 job.settings.threads, key=f"detp_bake-unit-{token}-{i}", pure=False, retries=0)
-                   for i, unit in enumerate(units)]
-        index = {f.key: i for i, f in enumerate(futures)}
-        pending, done, nxt, photons = set(futures), {}, 0, 0
+        ahead = AHEAD_PER_SLOT * sum(slots.values())  # units out at once: an early stop wastes little
         news = threading.Event()
-        for f in futures:
+
+        def submit(i):
+            f = client.submit(run, f"job-{token}", payload, [(b[0], b[-1] + 1) for b in units[i]], slots,
+                              job.settings.threads, key=f"detp_bake-unit-{token}-{i}", pure=False, retries=0)
             f.add_done_callback(lambda _: news.set())
+            return f
+        out, done, nxt, sent, photons, resubmitted = {}, {}, 0, 0, 0, 0
         t0 = time.perf_counter()
         try:
-            while nxt < len(futures):
+            while nxt < len(units):
+                while sent < len(units) and sent - nxt < ahead:
+                    out[sent] = submit(sent)
+                    sent += 1
                 if cancelled():
                     raise BakeCancelled()
                 if nxt not in done:
                     news.wait(0.2)
                     news.clear()
-                for f in [f for f in pending if f.done()]:
-                    pending.discard(f)
+                finished = {i: f for i, f in out.items() if f.done()}
+                for i, f in finished.items():
                     if f.status != "finished":
-                        raise BakeError(_failure(f, units[index[f.key]]))
-                    done[index[f.key]] = f.result()
-                    photons += sum(p["stats"]["photons"] for p in done[index[f.key]])
+                        raise BakeError(_failure(f, units[i]))
+                if finished:
+                    resubmitted += self._resubmitted([f.key for f in finished.values()])
+                for i, f in finished.items():
+                    done[i] = f.result()
+                    del out[i]  # released: the worker forgets the result
+                    photons += sum(p["stats"]["photons"] for p in done[i])
                     progress(photons)
                 while nxt in done:
                     for plain in done.pop(nxt):
                         yield Partial.from_plain(plain)
                     nxt += 1
             self.last = {**self.describe(), "units": len(units), "blocks_per_unit": len(units[0]) if units else 0,
-                         "resubmitted": self._resubmitted([f.key for f in futures]),
-                         "seconds": round(time.perf_counter() - t0, 3)}
+                         "resubmitted": resubmitted, "seconds": round(time.perf_counter() - t0, 3)}
         finally:
-            client.cancel([f for f in futures if not f.done()], force=True)
+            client.cancel(list(out.values()), force=True)
             client.cancel([payload])
 
-    def _units(self, blocks: list, worker_bytes: tuple[int, int]) -> list[list]:
-        """Runs of consecutive blocks: about UNITS_PER_SLOT per worker thread, fewer blocks each
-        where a worker's memory limit (read from the scheduler) would not hold their sums."""
+    def _units(self, blocks: list, worker_bytes: tuple[int, int], early_stop: bool = False) -> list[list]:
+        """Runs of consecutive blocks: about UNITS_PER_SLOT per worker thread (MAX_UNIT_BATCHES at most), fewer
+        blocks each where a worker's memory limit (read from the scheduler) would not hold their sums."""
         fixed, per_block = worker_bytes
         workers = self.client.scheduler_info(n_workers=-1)["workers"]
         slots = sum(w.get("nthreads", 1) for w in workers.values()) or 1
         size = max(1, -(-len(blocks) // (UNITS_PER_SLOT * slots)))
+        most = EARLY_STOP_UNIT_BATCHES if early_stop else MAX_UNIT_BATCHES
+        size = min(size, max(1, most // max(1, len(blocks[0]) if blocks else 1)))
         limited = [(w.get("memory_limit") or 0, a) for a, w in workers.items() if w.get("memory_limit")]
         if limited:
             limit, address = min(limited)
@@ -196,13 +208,14 @@ class Cluster:
         return [blocks[a:a + size] for a in range(0, len(blocks), size)]
 
     def _resubmitted(self, keys: list) -> int:
-        """Units the scheduler ran again because their worker died (its 'suspicious' count)."""
+        """Units the scheduler ran again because their worker died (its 'suspicious' count), asked
+        while the client still holds them; -1 each where the scheduler will not say."""
         try:
             counts = self.client.run_on_scheduler(
                 lambda keys, dask_scheduler=None: [dask_scheduler.tasks[k].suspicious for k in keys
                                                    if k in dask_scheduler.tasks], keys)
         except Exception:  # the scheduler refuses to run code: the count is unknown
-            return -1
+            return -len(keys)
         return int(sum(counts))
 
 

@@ -68,6 +68,17 @@ def test_two_workers_bake_exactly_what_one_process_bakes(cluster, name):
     assert "cluster" in far.report() and "cluster" not in local.report()
 
 
+def test_a_noise_target_stops_at_the_same_batch_as_here(cluster):
+    sc = _sphere()
+    settings = BakeSettings(estimator="disc_index", photons=2_000_000, bounces=3, batch_size=20_000, denoise=False,
+                            target_noise=4.0, estimator_settings=EstimatorSettings(radius=0.1))
+    local = compute(sc, settings)
+    far = compute(sc, settings, cluster=cluster)
+    assert local.stopped_by == far.stopped_by == "target_noise" and local.share < 0.2
+    assert local.share == far.share
+    _same(local, far)
+
+
 def test_a_killed_worker_loses_only_its_units(cluster):
     """SIGKILL to the worker that just took a unit: the scheduler runs the unit again elsewhere,
     the lightmap is the same bit for bit and the report counts the unit."""
