@@ -388,8 +388,8 @@ class Totals:
             for key, value in sums.items():
                 if key in total:
                     total[key] += value
-                else:
-                    total[key] = value
+                else:  # a copy: what came over the wire may be read-only
+                    total[key] = value.copy() if isinstance(value, (np.ndarray, list)) else value
             self.seconds[name] += part.seconds[name]
         self.batches += part.batches
 
