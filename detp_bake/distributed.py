@@ -83,7 +83,7 @@ class Cluster:
                 self.client = Client(self.scheduler, timeout=self.timeout, set_as_default=False)
             else:
                 self.local = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                          dashboard_address=None)
+                                          dashboard_address=":0")  # any free port: never clash
                 self.client = Client(self.local, timeout=self.timeout, set_as_default=False)
             self.client.wait_for_workers(1, timeout=self.timeout)
         except (OSError, TimeoutError) as exc:
