@@ -7,6 +7,7 @@ runs before tracing starts; progress goes to stderr, the report path to stdout.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
@@ -73,6 +74,13 @@ def _bake_arguments(b, with_scene_path):
                    help="denoise the lightmaps with OIDN (default on; needs the pyoidn package)")
     b.add_argument("--keep-raw", action="store_true",
                    help="also write each lightmap before denoising, as <object>.<estimator>.raw.exr")
+    b.add_argument("--scheduler", default="", metavar="ADDRESS",
+                   help="trace the photons on a Dask cluster: its scheduler, e.g. tcp://10.0.0.5:8786 "
+                        "(needs the dask and distributed packages; README: Baking on a cluster)")
+    b.add_argument("--workers", type=int, default=0, metavar="N",
+                   help="trace the photons on N worker processes of this machine (a Dask LocalCluster)")
+    b.add_argument("--connect-timeout", type=float, default=10.0, metavar="SECONDS",
+                   help="give up on the scheduler (or its first worker) after this long (default 10)")
     b.add_argument("--apply", action="store_true", help="wire the lightmaps into the materials")
     b.add_argument("--save", default=None, metavar="OUT.blend", help="save the baked .blend here")
 
@@ -146,7 +154,8 @@ def run_compare(args, bl_scene=None) -> int:
         replace(settings, estimator=name).validate()
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
     from . import comparison
-    results = bake_mod.compute_many(scene, settings, args.estimators, StderrProgress())
+    results = bake_mod.compute_many(scene, settings, args.estimators, StderrProgress(),
+                                    cluster=getattr(args, "cluster", None))
     for result in results.values():
         result.seconds["export"] = export_seconds
         bake_mod.write(result, out_dir)
@@ -178,7 +187,8 @@ def run_bake(args, bl_scene=None) -> int:
     """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene)."""
     settings = settings_from_args(args)
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
-    result = bake_mod.bake(scene, settings, out_dir, StderrProgress(), export_seconds=export_seconds)
+    result = bake_mod.bake(scene, settings, out_dir, StderrProgress(), export_seconds=export_seconds,
+                           cluster=getattr(args, "cluster", None))
     _log_noise(result)
     if args.apply:
         blender.apply_all(bl_scene, result.files, args.uv_layer, settings.estimator)
@@ -194,14 +204,33 @@ def run_bake(args, bl_scene=None) -> int:
     return 0
 
 
+def _cluster(args):
+    """The Dask cluster to trace on (--scheduler, --workers), connected once the settings are
+    checked and before the scene is opened; without either, a bake runs here and imports no Dask."""
+    if not (args.scheduler or args.workers):
+        return contextlib.nullcontext()
+    if args.scheduler and args.workers:
+        raise BakeError("--scheduler and --workers: choose one (a cluster of your own, or workers on this machine)")
+    if args.workers < 0:
+        raise BakeError(f"setting 'workers' = {args.workers}: must be 1 or more")
+    settings_from_args(args).validate()
+    from .distributed import Cluster
+    cluster = Cluster(args.scheduler, args.workers, timeout=args.connect_timeout)
+    cluster.connect()
+    info = cluster.describe()
+    _log(f"tracing on {info['workers']} Dask workers ({info['cores']} threads) at {info['address']}")
+    return cluster
+
+
 def main(argv: Optional[Sequence[str]] = None, bl_scene=None) -> int:
     parser = build_parser(with_scene_path=bl_scene is None)
     args = parser.parse_args(argv)
     try:
-        if args.command == "bake":
-            return run_bake(args, bl_scene)
-        if args.command == "compare":
-            return run_compare(args, bl_scene)
+        with _cluster(args) as args.cluster:
+            if args.command == "bake":
+                return run_bake(args, bl_scene)
+            if args.command == "compare":
+                return run_compare(args, bl_scene)
     except BakeError as exc:
         print(f"detp_bake: error: {exc}", file=sys.stderr)
         return 2

@@ -66,6 +66,20 @@ class BruteForceDETP(Estimator):
         self.segments += batch.segment_count
         self.seconds += time.perf_counter() - t0
 
+    def take(self):
+        sums = {"irradiance": self.acc, "crossings": int(self.crossings.sum()), "segments": self.segments,
+                "seconds": self.seconds}
+        self.acc = np.zeros_like(self.acc)
+        self.crossings[:] = 0
+        self.segments, self.seconds = 0, 0.0
+        return sums
+
+    def absorb(self, sums):
+        self.acc += sums["irradiance"]
+        self.crossings[0] += sums["crossings"]  # finish reads the total only
+        self.segments += sums["segments"]
+        self.seconds += sums["seconds"]
+
     def finish(self):
         n = len(self.texels)
         return Estimate(self.acc, {"segments": self.segments, "discs": n,

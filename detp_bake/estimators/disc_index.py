@@ -263,6 +263,28 @@ class DiscIndex(Estimator):
         s["query_splat"] += t3 - t2
         s["query"] += t3 - t0
 
+    QUERY_SECONDS = ("query", "query_order", "query_bin", "query_splat")
+
+    def take(self):
+        irradiance = np.empty_like(self.acc)
+        irradiance[self.tree.order] = self.acc  # texel order: another machine's tree may differ
+        sums = {"irradiance": irradiance, "stats": self.stats.sum(axis=0), "bin_tests": self.bin_tests,
+                "segments": self.segments, **{f"seconds_{k}": self.seconds[k] for k in self.QUERY_SECONDS}}
+        self.acc[:] = 0.0
+        self.stats[:] = 0
+        self.bin_tests = self.segments = 0
+        for k in self.QUERY_SECONDS:
+            self.seconds[k] = 0.0
+        return sums
+
+    def absorb(self, sums):
+        self.acc += sums["irradiance"][self.tree.order]
+        self.stats[0] += sums["stats"]  # finish reads the column sums only
+        self.bin_tests += sums["bin_tests"]
+        self.segments += sums["segments"]
+        for k in self.QUERY_SECONDS:
+            self.seconds[k] += sums[f"seconds_{k}"]
+
     def finish(self):
         t0 = time.perf_counter()
         out = np.empty_like(self.acc)

@@ -159,6 +159,22 @@ class SphereCache(Estimator):
         self.segments += len(length)
         self.seconds_query += time.perf_counter() - t0
 
+    def take(self):
+        self._flush()
+        sums = {"irradiance": self.acc, "stats": self.stats.sum(axis=0), "segments": self.segments,
+                "seconds_query": self.seconds_query}
+        self.acc = np.zeros_like(self.acc)
+        self.stats[:] = 0
+        self.segments, self.seconds_query = 0, 0.0
+        return sums
+
+    def absorb(self, sums):
+        self._flush()
+        self.acc += sums["irradiance"]
+        self.stats[0] += sums["stats"]  # finish reads the column sums only
+        self.segments += sums["segments"]
+        self.seconds_query += sums["seconds_query"]
+
     def finish(self):
         self._flush()
         s = self.stats.sum(axis=0)
