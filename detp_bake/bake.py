@@ -17,8 +17,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from . import __version__, denoise as denoise_mod, direct as direct_mod, estimators, images, memory, \
-    texels as texels_mod
+from . import __version__, denoise as denoise_mod, direct as direct_mod, estimators, images, interrupt, memory, \
+    staging, texels as texels_mod
 from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
@@ -396,41 +396,58 @@ def output_paths(result: BakeResult, out_dir: Path) -> dict:
 
 def write(result: BakeResult, out_dir: str | os.PathLike,
           progress: Optional[Callable[[Progress], None]] = None, cancel=None) -> Path:
-    """Write every lightmap and report.json; files appear together or not at all (a cancel
-    before the last file is staged removes the staged ones)."""
+    """Write every lightmap and report.json; files appear together or not at all."""
+    return write_many({result.settings.estimator: result}, out_dir, progress, cancel)
+
+
+def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Callable[[Progress], None]] = None,
+               cancel=None, extra: Optional[dict] = None, summary: Optional[dict] = None) -> Path:
+    """Write the lightmaps of one or more results ({estimator: BakeResult}, as `compute_many`
+    gives), `extra` files ({file name: write(path)}) and one report.json: a single result's report,
+    or (several results, or a `summary` given) `summary` and a section per estimator. Everything is staged under hidden
+    temporary names and renamed at the end (staging.py): a cancel, a full disk or any error
+    before then leaves the folder as it was. Other files in the folder are left alone."""
     t0 = time.perf_counter()
     cancelled = _cancel_fn(cancel)
     out = images.check_writable_dir(out_dir)
     report = progress or (lambda p: None)
-    paths = output_paths(result, out)
-    staged = []
+    paths = {name: output_paths(r, out) for name, r in results.items()}
+    count = sum(len(p) for p in paths.values())
+    done = 0
     try:
-        for i, (name, targets) in enumerate(paths.items()):
-            for target in targets:
-                fmt = target.suffix[1:]
-                tmp = target.with_name(f".{target.stem}.partial{target.suffix}")
-                picture = result.raw_images[name] if target.name.endswith(".raw.exr") else result.images[name]
-                if fmt == "exr":
-                    images.write_exr(tmp, picture, half=result.settings.half)
-                else:
-                    images.WRITERS[fmt](tmp, picture)
-                staged.append((tmp, target))
-            report(Progress("write", (i + 1) / len(paths), f"Writing {name}"))
+        with staging.FileSet(out) as files:
+            for estimator, result in results.items():
+                for name, targets in paths[estimator].items():
+                    for target in targets:
+                        fmt = target.suffix[1:]
+                        picture = result.raw_images[name] if target.name.endswith(".raw.exr") else result.images[name]
+                        half = result.settings.half
+                        files.stage(target.name, lambda tmp: images.write_exr(tmp, picture, half=half)
+                                    if fmt == "exr" else images.WRITERS[fmt](tmp, picture))
+                        done += 1
+                        interrupt.hold("write", cancelled)
+                        if cancelled():
+                            raise BakeCancelled()
+                    report(Progress("write", done / max(count, 1), f"Writing {name}"))
+            for estimator, result in results.items():
+                result.files = {name: [str(p) for p in targets] for name, targets in paths[estimator].items()}
+            for name, write_file in (extra or {}).items():  # these may read the results' files
+                files.stage(name, write_file)
+            seconds = time.perf_counter() - t0
+            for result in results.values():
+                result.seconds["write"] = seconds
+            if summary is None and len(results) == 1:
+                content = next(iter(results.values())).report()
+            else:
+                content = {"version": __version__, **(summary or {}),
+                           "estimators": {name: r.report() for name, r in results.items()}}
+            files.stage_text("report.json", json.dumps(content, indent=2))
             if cancelled():
                 raise BakeCancelled()
-        for tmp, target in staged:
-            os.replace(tmp, target)
-    except BaseException:
-        for tmp, _ in staged:
-            Path(tmp).unlink(missing_ok=True)
-        raise
-    result.files = {name: [str(p) for p in targets] for name, targets in paths.items()}
-    result.seconds["write"] = time.perf_counter() - t0
-    report_path = out / "report.json"
-    tmp = out / ".report.partial.json"
-    tmp.write_text(json.dumps(result.report(), indent=2))
-    os.replace(tmp, report_path)
-    return report_path
+            files.commit()
+    except OSError as exc:  # a full disk, a folder gone: nothing of this set is left
+        raise BakeError(f"cannot write '{exc.filename or out}': {exc.strerror or exc}") from None
+    return out / "report.json"
 
 
 def bake(scene: Scene, settings: BakeSettings, out_dir: str | os.PathLike,
@@ -441,7 +458,7 @@ def bake(scene: Scene, settings: BakeSettings, out_dir: str | os.PathLike,
     images.check_writable_dir(out_dir)
     result = compute(scene, settings, progress, cancel)
     result.seconds["export"] = export_seconds
-    write(result, out_dir, progress)
+    write(result, out_dir, progress, cancel)
     return result
 
 

@@ -1,0 +1,137 @@
+"""The command line under stress: Ctrl+C and SIGTERM, a full disk, an older bake in the output
+folder, compare's single report, honest stdout and the warnings for results that would silently be
+wrong; each on a real scene (the bundled Cornell box or one built here with bpy)."""
+import json
+import os
+import resource
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from conftest import CORNELL, ROOT
+from detp_bake.cli import main
+
+
+def _files(folder):
+    """Every file in `folder`, hidden ones included: {name: bytes}."""
+    return {p.name: p.read_bytes() for p in folder.iterdir()} if folder.exists() else {}
+
+
+def _start(args, tmp_path, **env):
+    environ = dict(os.environ, PYTHONPATH=str(ROOT), **env)
+    if "NUMBA_CACHE_DIR" in environ:  # the subprocess runs elsewhere: keep the compiled cache
+        environ["NUMBA_CACHE_DIR"] = os.path.abspath(environ["NUMBA_CACHE_DIR"])
+    return subprocess.Popen([sys.executable, "-m", "detp_bake", *args], cwd=tmp_path, env=environ,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for(proc, text, seconds=120.0):
+    """Read stderr until a line holds `text`; the lines read so far."""
+    lines = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        line = proc.stderr.readline()
+        if not line:
+            break
+        lines.append(line)
+        if text in line:
+            return lines
+    proc.kill()
+    raise AssertionError(f"never saw {text!r}: {''.join(lines)}")
+
+
+def _older_bake(out):
+    out.mkdir()
+    (out / "Floor.disc_index.exr").write_bytes(b"an older bake")
+    (out / "notes.txt").write_text("the user's")
+    return _files(out)
+
+
+@pytest.mark.parametrize("sig, phase", [(signal.SIGINT, "trace"), (signal.SIGTERM, "trace"),
+                                        (signal.SIGINT, "write")])
+def test_a_signal_cancels_cleanly_while_tracing_or_writing(tmp_path, sig, phase):
+    """One line, exit code 130, nothing on stdout, the folder exactly as it was (no hidden
+    temporary file either). The write phase is reached by the test hold: the bake waits after its
+    first staged file, which the test sees on disk before it sends the signal."""
+    out = tmp_path / "out"
+    before = _older_bake(out)
+    photons = "100000000" if phase == "trace" else "5000"
+    env = {"DETP_BAKE_TEST_HOLD": "write"} if phase == "write" else {}
+    proc = _start(["bake", str(CORNELL), "--photons", photons, "--resolution", "16", "--out", str(out)],
+                  tmp_path, **env)
+    seen = _wait_for(proc, "Tracing" if phase == "trace" else "holding in write")
+    if phase == "write":
+        assert any(".partial." in name for name in _files(out))  # a file really was being staged
+    proc.send_signal(sig)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, "".join(seen) + stderr
+    assert stderr.strip() == "detp_bake: cancelled: nothing written"
+    assert "Traceback" not in stderr and stdout == ""
+    assert _files(out) == before
+
+
+def test_a_full_disk_leaves_no_partial_file(tmp_path, empty_blend, bpy):
+    """The file size limit (RLIMIT_FSIZE) makes every write past 512 bytes fail as a full disk would:
+    the bake says which folder, and neither a 0-byte nor a half-written image is left."""
+    from blender_helpers import export, plane_object
+    from detp_bake import bake
+    from detp_bake.errors import BakeError
+    plane_object(bpy, "Floor", 2.0, (0, 0, 0))
+    bpy.ops.object.light_add(type="POINT", location=(0.3, 0, 0.5))  # a gradient: no tiny constant image
+    scene = export(bpy, resolution=32)
+    result = bake.compute(scene, bake.BakeSettings(photons=2000, resolution=32, denoise=False))
+    out = tmp_path / "out"
+    before = _older_bake(out)
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    previous = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (512, hard))
+    try:
+        with pytest.raises(BakeError, match="cannot write") as err:
+            bake.write(result, out)
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        signal.signal(signal.SIGXFSZ, previous)
+    assert "Floor.disc_index" in str(err.value)  # the image being written when the disk filled
+    assert _files(out) == before
+    bake.write(result, out)  # with room again, the same result writes
+    assert (out / "Floor.disc_index.exr").stat().st_size > 2048 and (out / "notes.txt").exists()
+
+
+def test_signal_handlers_are_restored_and_an_in_process_cancel_says_so(tmp_path, capsys):
+    """`blender -c detp_bake` runs `main` inside Blender: a SIGINT during its bake cancels it, and
+    afterwards Blender's own handlers are back."""
+    before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+    timer = threading.Timer(4.0, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        code = main(["bake", str(CORNELL), "--photons", "1000000000", "--resolution", "16",
+                     "--out", str(tmp_path / "out")])
+    finally:
+        timer.cancel()
+    assert code == 130 and "cancelled: nothing written" in capsys.readouterr().err
+    assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before
+    assert _files(tmp_path / "out") == {}
+
+
+def test_compare_writes_one_report_with_a_section_per_estimator(tmp_path, capsys):
+    out = tmp_path / "c"
+    code = main(["compare", str(CORNELL), "--estimators", "photon_map", "disc_index", "--objects", "Floor",
+                 "--photons", "20000", "--resolution", "16", "--out", str(out), "--json"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    report = json.loads((out / "report.json").read_text())
+    assert set(report["estimators"]) == {"photon_map", "disc_index"}
+    for name, section in report["estimators"].items():
+        assert section["settings"]["estimator"] == name and section["estimator"]["name"] == name
+        assert section["objects"][0]["files"] == [str(out / f"Floor.{name}.exr")]
+    assert report["comparison"]["estimators"] == ["photon_map", "disc_index"]
+    assert 0 < report["comparison"]["difference_to_first"]["disc_index"] < 1
+    summary = json.loads(captured.out)  # --json: stdout is one JSON document
+    assert summary["report"] == str(out / "report.json") and str(out / "compare.png") in summary["extra"]
+    assert sorted(p.name for p in out.iterdir()) == ["Floor.disc_index.exr", "Floor.photon_map.exr",
+                                                    "compare.json", "compare.png", "report.json"]
