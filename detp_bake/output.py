@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 import os
 import sys
-from contextlib import contextmanager
+from contextlib import contextmanager, redirect_stdout
 from pathlib import Path
 
 
@@ -29,15 +29,19 @@ def quiet_stdout(to: str = "stderr"):
     _flush_c_stdio()
     saved = os.dup(1)
     target = os.open(os.devnull, os.O_WRONLY) if to == "null" else os.dup(2)
+    python_out = open(os.devnull, "w") if to == "null" else sys.stderr
     try:
         os.dup2(target, 1)
-        yield
+        with redirect_stdout(python_out):  # Python's prints too, wherever sys.stdout points
+            yield
     finally:
         sys.stdout.flush()
         _flush_c_stdio()
         os.dup2(saved, 1)
         os.close(target)
         os.close(saved)
+        if to == "null":
+            python_out.close()
 
 
 def log(msg: str) -> None:

@@ -135,3 +135,59 @@ def test_compare_writes_one_report_with_a_section_per_estimator(tmp_path, capsys
     assert summary["report"] == str(out / "report.json") and str(out / "compare.png") in summary["extra"]
     assert sorted(p.name for p in out.iterdir()) == ["Floor.disc_index.exr", "Floor.photon_map.exr",
                                                     "compare.json", "compare.png", "report.json"]
+
+
+def _room(bpy, path, lightmap_uv=False):
+    """A floor and a wall lit by a point light, saved as `path`; Lightmap UVs only if asked."""
+    from blender_helpers import plane_object
+    from detp_bake import blender
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    floor = plane_object(bpy, "Floor", 2.0, (0, 0, 0))
+    wall = plane_object(bpy, "Wall", 2.0, (0, 1, 1), rotation=(np.pi / 2, 0, 0))
+    bpy.ops.object.light_add(type="POINT", location=(0, 0, 1.5))
+    bpy.context.active_object.data.energy = 100.0
+    if lightmap_uv:
+        for obj in (floor, wall):
+            blender.ensure_lightmap_uv(obj, blender.DEFAULT_UV)
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    return path
+
+
+def test_stdout_holds_only_the_files_written_and_warnings_say_what_will_not_last(tmp_path, capfd, bpy):
+    """Blender's "Read blend:" and Lightmap Pack's chatter (printed from C) go to stderr; a Lightmap
+    UV layer created without --save, and --apply without --save, are said; a second bake replaces
+    its own files, leaves the rest, and lists in one line the older PNGs it did not replace."""
+    scene = _room(bpy, tmp_path / "room.blend")
+    out = tmp_path / "out"
+    common = ["bake", str(scene), "--photons", "20000", "--resolution", "16", "--out", str(out)]
+    capfd.readouterr()
+    assert main([*common, "--format", "exr,png"]) == 0
+    first = capfd.readouterr()
+    lines = first.out.splitlines()
+    assert lines == [str(out / n) for n in ("Floor.disc_index.exr", "Floor.disc_index.png", "Wall.disc_index.exr",
+                                           "Wall.disc_index.png", "report.json")]
+    assert "Read blend" in first.err and "Read blend" not in first.out
+    assert "warning: UV layer 'Lightmap' created on Floor, Wall is not stored anywhere (no --save)" in first.err
+    png = (out / "Floor.disc_index.png").read_bytes()
+    (out / "notes.txt").write_text("the user's")
+
+    assert main([*common, "--format", "exr", "--apply"]) == 0
+    second = capfd.readouterr()
+    assert second.out.splitlines() == [str(out / n) for n in ("Floor.disc_index.exr", "Wall.disc_index.exr",
+                                                              "report.json")]
+    assert "warning: --apply without --save" in second.err and "nothing lasting happens" in second.err
+    stale = [line for line in second.err.splitlines() if "older bake" in line]
+    assert len(stale) == 1 and "Floor.disc_index.png, Wall.disc_index.png" in stale[0]
+    assert (out / "Floor.disc_index.png").read_bytes() == png and (out / "notes.txt").exists()
+    report = json.loads((out / "report.json").read_text())
+    assert report["settings"]["formats"] == ["exr"] and any("older bake" in w for w in report["warnings"])
+
+
+def test_save_pointing_at_a_folder_is_refused_before_work(tmp_path, capsys, bpy):
+    scene = _room(bpy, tmp_path / "room.blend", lightmap_uv=True)
+    folder = tmp_path / "saved"
+    folder.mkdir()
+    code = main(["bake", str(scene), "--out", str(tmp_path / "out"), "--apply", "--save", str(folder)])
+    err = capsys.readouterr().err
+    assert code == 2 and f"--save '{folder}' is a folder" in err and "Tracing" not in err
+    assert _files(tmp_path / "out") == {} and _files(folder) == {}
