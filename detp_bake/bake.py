@@ -204,6 +204,7 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
     for name in names:
         replace(settings, estimator=name).validate()
     scene.check()
+    scene, offset = scene.recentred()  # float32 rays and discs work near the origin (scene.py)
     report = progress or (lambda p: None)
     cancelled = _cancel_fn(cancel)
     t_start = time.perf_counter()  # the time limit counts the whole bake
@@ -325,6 +326,8 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
             k = settings.estimator_settings.k
             result.noise = {lm.name: 1.0 / np.sqrt(k - 1) for lm in texels.lightmaps}
         results[name] = result
+    if offset.any():
+        texels.position += offset  # back where the texels are, in world space
     return results
 
 
