@@ -325,10 +325,50 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
         elif name == "photon_map":  # DESIGN.md §2: about 1/√(k − 1) whatever the photon count
             k = settings.estimator_settings.k
             result.noise = {lm.name: 1.0 / np.sqrt(k - 1) for lm in texels.lightmaps}
+        result.warnings.extend(layout_warnings(texels, settings.estimator_settings,
+                                               radius if name != "photon_map" else None))
+        k = settings.estimator_settings.k
+        if name == "photon_map" and result.counters.get("hits", k) < k:
+            result.warnings.append(f"setting 'k' = {k} is more than the {result.counters['hits']:,} photons the "
+                                   "photon map stored: every texel averaged all of them (a blur over the scene); "
+                                   "trace more photons or lower k")
         results[name] = result
     if offset.any():
         texels.position += offset  # back where the texels are, in world space
     return results
+
+
+OVERLAP_WARNING = 0.01  # a share of texels: Smart UV Project may fold a bent quad over a texel or two
+OUTSIDE_WARNING = 0.001  # a share of UV area
+
+
+def layout_warnings(texels, estimator_settings, radius=None) -> list:
+    """What would make lightmaps silently wrong: overlapping lightmap UVs, UVs outside 0..1, and
+    (`radius`: the DETP discs' radius per texel) discs wider than the objects they lie on."""
+    out = []
+    for lm in texels.lightmaps:
+        if lm.overlap >= OVERLAP_WARNING:
+            out.append(f"object '{lm.name}': {100 * lm.overlap:.0f} % of its lightmap texels lie under two or more "
+                       "faces (overlapping lightmap UVs, e.g. Array or Mirror copies sharing them): those faces get "
+                       "one shared value; give every face its own UV space (Lightmap Pack)")
+        if lm.outside >= OUTSIDE_WARNING:
+            out.append(f"object '{lm.name}': {100 * lm.outside:.1f} % of its lightmap UV area lies outside 0..1 and is "
+                       "not baked: unwrap it into 0..1 (Lightmap Pack)")
+    if radius is not None and len(texels):
+        wide = []
+        for lm in texels.lightmaps:
+            pos = texels.position[lm.texels]
+            across = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0)))
+            r = float(np.min(radius[lm.texels]))
+            if r >= across:
+                wide.append(f"'{lm.name}' ({r:.3g} m against {across:.3g} m)")
+        if wide:
+            setting = ("radius", estimator_settings.radius) if estimator_settings.radius is not None else \
+                ("radius_texels", estimator_settings.radius_texels)
+            out.append(f"setting '{setting[0]}' = {setting[1]:g}: every disc is wider than the object it lies on "
+                       f"for {', '.join(wide[:5])}{' …' if len(wide) > 5 else ''}, so each such lightmap is one "
+                       f"blurred average: lower {setting[0]}")
+    return out
 
 
 def _finish(settings, bounces, texels, est, tracer, seconds, direct_e=None, direct_info=None) -> BakeResult:

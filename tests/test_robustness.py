@@ -213,3 +213,50 @@ def test_a_scene_10_km_from_the_origin_bakes_as_it_does_at_the_origin(tmp_path, 
         assert abs(b / a - 1.0) < 0.005, (lm.name, a, b)
     # Texel positions are reported where the texels are, in world space.
     assert np.allclose(far.texels.position, near.texels.position + [10000.0, -10000.0, 500.0], atol=1e-3)
+
+
+def _square_uvs(obj, size):
+    """The plane's Lightmap layer set to cover [0, size]²."""
+    layer = obj.data.uv_layers.get("Lightmap") or obj.data.uv_layers.new(name="Lightmap")
+    corners = {(-1, -1): (0, 0), (1, -1): (size, 0), (1, 1): (size, size), (-1, 1): (0, size)}
+    for loop in obj.data.loops:
+        co = obj.data.vertices[loop.vertex_index].co
+        layer.data[loop.index].uv = corners[(round(co.x), round(co.y))]
+
+
+def test_overlapping_and_out_of_range_uvs_huge_discs_and_a_large_k_are_warned(tmp_path, capsys, bpy):
+    """Array copies sharing one UV square (every texel under two faces), UVs over [0, 2]² (75 % of
+    their area outside 0..1), discs of 1000 texels on a 2 m plane, and k over the photons stored:
+    each a warning that names the object or setting and the share; the bake still writes."""
+    from blender_helpers import plane_object
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    tiles = plane_object(bpy, "Tiles", 2.0, (0, 0, 0))
+    _square_uvs(tiles, 1.0)
+    array = tiles.modifiers.new("Array", "ARRAY")
+    array.count = 2
+    poster = plane_object(bpy, "Poster", 2.0, (0, 3, 1), rotation=(np.pi / 2, 0, 0))
+    _square_uvs(poster, 2.0)
+    bpy.ops.object.light_add(type="POINT", location=(1, 1, 2))
+    path = tmp_path / "uvs.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    out = tmp_path / "out"
+    code = main(["bake", str(path), "--photons", "20000", "--resolution", "16", "--radius-texels", "1000",
+                 "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    warnings = [line for line in err.splitlines() if "warning:" in line]
+    assert any("object 'Tiles': 100 % of its lightmap texels lie under two or more faces" in w for w in warnings)
+    assert any("object 'Poster': 75.0 % of its lightmap UV area lies outside 0..1" in w for w in warnings)
+    wide = [w for w in warnings if "setting 'radius_texels' = 1000" in w]
+    assert len(wide) == 1 and "'Tiles'" in wide[0] and "'Poster'" in wide[0]
+    assert not any("Poster" in w and "two or more faces" in w for w in warnings)
+    report = json.loads((out / "report.json").read_text())
+    assert len(report["warnings"]) == len(warnings)
+    assert sorted(p.name for p in out.iterdir()) == ["Poster.disc_index.exr", "Tiles.disc_index.exr", "report.json"]
+
+    code = main(["bake", str(path), "--estimator", "photon_map", "--photons", "300", "--k", "5000",
+                 "--resolution", "16", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert any("setting 'k' = 5000 is more than the" in line for line in err.splitlines() if "warning:" in line)
+    assert "radius_texels" not in err  # the photon map has no discs
