@@ -53,7 +53,7 @@ def _older_bake(out):
 
 
 @pytest.mark.parametrize("sig, phase", [(signal.SIGINT, "trace"), (signal.SIGTERM, "trace"),
-                                        (signal.SIGINT, "write")])
+                                        (signal.SIGINT, "write")], ids=["sigint-trace", "sigterm-trace", "sigint-write"])
 def test_a_signal_cancels_cleanly_while_tracing_or_writing(tmp_path, sig, phase):
     """One line, exit code 130, nothing on stdout, the folder exactly as it was (no hidden
     temporary file either). The write phase is reached by the test hold: the bake waits after its
