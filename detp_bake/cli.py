@@ -159,24 +159,6 @@ def _check_cancel(cancel) -> None:
         raise BakeCancelled()
 
 
-def _warn_stale(out_dir, result, warn) -> None:
-    """Files of the same objects and estimator left by an older bake that this one does not replace."""
-    paths = bake_mod.output_paths(result, out_dir)
-    writing = {p.name for targets in paths.values() for p in targets}
-    stems = images.file_stems(result.images)
-    stale = output.stale_lightmaps(out_dir, stems, result.settings.estimator, writing)
-    if stale:
-        warn(f"{len(stale)} lightmaps in {out_dir} from an older bake of the same objects are left as they "
-             f"were (not written this time): {', '.join(stale[:8])}{' …' if len(stale) > 8 else ''}")
-
-
-def _gather_warnings(result, warn) -> None:
-    """The core's warnings on stderr too; report.json then holds the command line's and the core's."""
-    for w in result.warnings:
-        warn(w)
-    result.warnings = list(warn)
-
-
 def run_compare(args, bl_scene=None, cancel=None) -> dict:
     """The same photons through several estimators: their lightmaps, compare.png, compare.json and
     one report.json with a section per estimator, all written together."""
@@ -190,7 +172,7 @@ def run_compare(args, bl_scene=None, cancel=None) -> dict:
     results = bake_mod.compute_many(scene, settings, args.estimators, StderrProgress(), cancel)
     for result in results.values():
         result.seconds["export"] = export_seconds
-        _warn_stale(out_dir, result, warn)
+        output.warn_stale(out_dir, result, warn)
     ours = list(warn)
     for w in dict.fromkeys(w for r in results.values() for w in r.warnings):
         warn(w)
@@ -208,8 +190,8 @@ def run_compare(args, bl_scene=None, cancel=None) -> dict:
                                  summary={"comparison": summary})
     for name in args.estimators:
         _log(f"{name}: estimate {seconds[name]:.2f} s, difference to {args.estimators[0]} {100 * diffs[name]:.1f} %")
-    return {"command": "compare", "files": {n: r.files for n, r in results.items()}, "extra": [str(out_dir / name) for name in extra],
-            "report": str(report), "warnings": list(warn), **summary}
+    return {"command": "compare", "files": {n: r.files for n, r in results.items()},
+            "extra": [str(out_dir / name) for name in extra], "report": str(report), "warnings": list(warn), **summary}
 
 
 def _log_noise(result) -> None:
@@ -231,8 +213,8 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
     result = bake_mod.compute(scene, settings, StderrProgress(), cancel)
     result.seconds["export"] = export_seconds
     _log_noise(result)
-    _warn_stale(out_dir, result, warn)
-    _gather_warnings(result, warn)
+    output.warn_stale(out_dir, result, warn)
+    output.gather_warnings(result, warn)
     report = bake_mod.write(result, out_dir, StderrProgress(), cancel)
     # The files are in place: from here on a signal no longer undoes the bake.
     saved = None
