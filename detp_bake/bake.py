@@ -18,8 +18,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from . import __version__, denoise as denoise_mod, direct as direct_mod, estimators, images, memory, \
-    texels as texels_mod
+from . import __version__, denoise as denoise_mod, direct as direct_mod, estimators, images, interrupt, memory, \
+    staging, texels as texels_mod
 from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
@@ -209,6 +209,7 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None) -> dic
     for name in names:
         replace(settings, estimator=name).validate()
     scene.check()
+    scene, offset = scene.recentred()  # float32 rays and discs work near the origin (scene.py)
     report = progress or (lambda p: None)
     cancelled = _cancel_fn(cancel)
     t_start = time.perf_counter()  # the time limit counts the whole bake
@@ -347,7 +348,16 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None) -> dic
         elif name == "photon_map":  # DESIGN.md §2: about 1/√(k − 1) whatever the photon count
             k = settings.estimator_settings.k
             result.noise = {lm.name: 1.0 / np.sqrt(k - 1) for lm in texels.lightmaps}
+        result.warnings.extend(layout_warnings(texels, settings.estimator_settings,
+                                               radius if name != "photon_map" else None))
+        k = settings.estimator_settings.k
+        if name == "photon_map" and result.counters.get("hits", k) < k:
+            result.warnings.append(f"setting 'k' = {k} is more than the {result.counters['hits']:,} photons the "
+                                   "photon map stored: every texel averaged all of them (a blur over the scene); "
+                                   "trace more photons or lower k")
         results[name] = result
+    if offset.any():
+        texels.position += offset  # back where the texels are, in world space
     return results
 
 
@@ -471,6 +481,39 @@ class TraceJob:
                 for name in self.names}
 
 
+OVERLAP_WARNING = 0.01  # a share of texels: Smart UV Project may fold a bent quad over a texel or two
+OUTSIDE_WARNING = 0.001  # a share of UV area
+
+
+def layout_warnings(texels, estimator_settings, radius=None) -> list:
+    """What would make lightmaps silently wrong: overlapping lightmap UVs, UVs outside 0..1, and
+    (`radius`: the DETP discs' radius per texel) discs wider than the objects they lie on."""
+    out = []
+    for lm in texels.lightmaps:
+        if lm.overlap >= OVERLAP_WARNING:
+            out.append(f"object '{lm.name}': {100 * lm.overlap:.0f} % of its lightmap texels lie under two or more "
+                       "faces (overlapping lightmap UVs, e.g. Array or Mirror copies sharing them): those faces get "
+                       "one shared value; give every face its own UV space (Lightmap Pack)")
+        if lm.outside >= OUTSIDE_WARNING:
+            out.append(f"object '{lm.name}': {100 * lm.outside:.1f} % of its lightmap UV area lies outside 0..1 and is "
+                       "not baked: unwrap it into 0..1 (Lightmap Pack)")
+    if radius is not None and len(texels):
+        wide = []
+        for lm in texels.lightmaps:
+            pos = texels.position[lm.texels]
+            across = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0)))
+            r = float(np.min(radius[lm.texels]))
+            if r >= across:
+                wide.append(f"'{lm.name}' ({r:.3g} m against {across:.3g} m)")
+        if wide:
+            setting = ("radius", estimator_settings.radius) if estimator_settings.radius is not None else \
+                ("radius_texels", estimator_settings.radius_texels)
+            out.append(f"setting '{setting[0]}' = {setting[1]:g}: every disc is wider than the object it lies on "
+                       f"for {', '.join(wide[:5])}{' …' if len(wide) > 5 else ''}, so each such lightmap is one "
+                       f"blurred average: lower {setting[0]}")
+    return out
+
+
 def _finish(settings, bounces, texels, est, tracer, seconds, direct_e=None, direct_info=None) -> BakeResult:
     """E/π per texel (Cycles' Diffuse bake unit, DIRECT+INDIRECT, no COLOR), as dilated images."""
     irradiance = est.irradiance if direct_e is None else est.irradiance + direct_e
@@ -541,41 +584,58 @@ def output_paths(result: BakeResult, out_dir: Path) -> dict:
 
 def write(result: BakeResult, out_dir: str | os.PathLike,
           progress: Optional[Callable[[Progress], None]] = None, cancel=None) -> Path:
-    """Write every lightmap and report.json; files appear together or not at all (a cancel
-    before the last file is staged removes the staged ones)."""
+    """Write every lightmap and report.json; files appear together or not at all."""
+    return write_many({result.settings.estimator: result}, out_dir, progress, cancel)
+
+
+def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Callable[[Progress], None]] = None,
+               cancel=None, extra: Optional[dict] = None, summary: Optional[dict] = None) -> Path:
+    """Write the lightmaps of one or more results ({estimator: BakeResult}, as `compute_many`
+    gives), `extra` files ({file name: write(path)}) and one report.json: a single result's report,
+    or (several results, or a `summary` given) `summary` and a section per estimator. Everything is staged under hidden
+    temporary names and renamed at the end (staging.py): a cancel, a full disk or any error
+    before then leaves the folder as it was. Other files in the folder are left alone."""
     t0 = time.perf_counter()
     cancelled = _cancel_fn(cancel)
     out = images.check_writable_dir(out_dir)
     report = progress or (lambda p: None)
-    paths = output_paths(result, out)
-    staged = []
+    paths = {name: output_paths(r, out) for name, r in results.items()}
+    count = sum(len(p) for p in paths.values())
+    done = 0
     try:
-        for i, (name, targets) in enumerate(paths.items()):
-            for target in targets:
-                fmt = target.suffix[1:]
-                tmp = target.with_name(f".{target.stem}.partial{target.suffix}")
-                picture = result.raw_images[name] if target.name.endswith(".raw.exr") else result.images[name]
-                if fmt == "exr":
-                    images.write_exr(tmp, picture, half=result.settings.half)
-                else:
-                    images.WRITERS[fmt](tmp, picture)
-                staged.append((tmp, target))
-            report(Progress("write", (i + 1) / len(paths), f"Writing {name}"))
+        with staging.FileSet(out) as files:
+            for estimator, result in results.items():
+                for name, targets in paths[estimator].items():
+                    for target in targets:
+                        fmt = target.suffix[1:]
+                        picture = result.raw_images[name] if target.name.endswith(".raw.exr") else result.images[name]
+                        half = result.settings.half
+                        files.stage(target.name, lambda tmp: images.write_exr(tmp, picture, half=half)
+                                    if fmt == "exr" else images.WRITERS[fmt](tmp, picture))
+                        done += 1
+                        interrupt.hold("write", cancelled)
+                        if cancelled():
+                            raise BakeCancelled()
+                    report(Progress("write", done / max(count, 1), f"Writing {name}"))
+            for estimator, result in results.items():
+                result.files = {name: [str(p) for p in targets] for name, targets in paths[estimator].items()}
+            for name, write_file in (extra or {}).items():  # these may read the results' files
+                files.stage(name, write_file)
+            seconds = time.perf_counter() - t0
+            for result in results.values():
+                result.seconds["write"] = seconds
+            if summary is None and len(results) == 1:
+                content = next(iter(results.values())).report()
+            else:
+                content = {"version": __version__, **(summary or {}),
+                           "estimators": {name: r.report() for name, r in results.items()}}
+            files.stage_text("report.json", json.dumps(content, indent=2))
             if cancelled():
                 raise BakeCancelled()
-        for tmp, target in staged:
-            os.replace(tmp, target)
-    except BaseException:
-        for tmp, _ in staged:
-            Path(tmp).unlink(missing_ok=True)
-        raise
-    result.files = {name: [str(p) for p in targets] for name, targets in paths.items()}
-    result.seconds["write"] = time.perf_counter() - t0
-    report_path = out / "report.json"
-    tmp = out / ".report.partial.json"
-    tmp.write_text(json.dumps(result.report(), indent=2))
-    os.replace(tmp, report_path)
-    return report_path
+            files.commit()
+    except OSError as exc:  # a full disk, a folder gone: nothing of this set is left
+        raise BakeError(f"cannot write '{exc.filename or out}': {exc.strerror or exc}") from None
+    return out / "report.json"
 
 
 def bake(scene: Scene, settings: BakeSettings, out_dir: str | os.PathLike,
@@ -586,7 +646,7 @@ def bake(scene: Scene, settings: BakeSettings, out_dir: str | os.PathLike,
     images.check_writable_dir(out_dir)
     result = compute(scene, settings, progress, cancel, cluster)
     result.seconds["export"] = export_seconds
-    write(result, out_dir, progress)
+    write(result, out_dir, progress, cancel)
     return result
 
 

@@ -2,7 +2,9 @@
 parser behind Blender's `blender -b SCENE.blend -c detp_bake bake ...`.
 
 Every check that can fail (settings, the .blend path, the output folder, object names, UV layers)
-runs before tracing starts; progress goes to stderr, the report path to stdout.
+runs before tracing starts. stdout lists the files written (or, with --json, a summary); progress,
+warnings and Blender's own messages go to stderr (output.py). Ctrl+C or SIGTERM cancels cleanly
+(interrupt.py): exit code 130, nothing written.
 """
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from pathlib import Path
 from dataclasses import replace
 from typing import Optional, Sequence
 
-from . import __version__, bake as bake_mod, images
+from . import __version__, bake as bake_mod, images, interrupt, output
 from .errors import BakeCancelled, BakeError
 from .estimators import EstimatorSettings, names as estimator_names
 
@@ -83,6 +85,7 @@ def _bake_arguments(b, with_scene_path):
                    help="give up on the scheduler (or its first worker) after this long (default 10)")
     b.add_argument("--apply", action="store_true", help="wire the lightmaps into the materials")
     b.add_argument("--save", default=None, metavar="OUT.blend", help="save the baked .blend here")
+    b.add_argument("--json", action="store_true", help="print a JSON summary on stdout instead of the file list")
 
 
 def settings_from_args(args) -> bake_mod.BakeSettings:
@@ -121,14 +124,20 @@ def _log(msg: str) -> None:
     print(f"detp_bake: {msg}", file=sys.stderr, flush=True)
 
 
-def _open_scene(args, settings, bl_scene):
+def _open_scene(args, settings, bl_scene, warn=output.log):
     """Check the inputs, open the .blend (unless Blender has one open) and export it."""
     settings.validate()
     if args.apply and "exr" not in settings.formats:
         raise BakeError("--apply needs the exr format in --format")
+    if args.save and (Path(args.save).is_dir() or args.save.endswith(("/", "\\"))):
+        raise BakeError(f"--save '{args.save}' is a folder: give the .blend file to save, "
+                        f"e.g. --save {Path(args.save) / 'baked.blend'}")
     out_dir = images.check_writable_dir(args.out)
     if args.save:
         images.check_writable_dir(Path(args.save).resolve().parent)
+    elif args.apply:
+        warn("--apply without --save: the lightmaps are wired into the materials in memory only, and "
+             "nothing lasting happens (add --save OUT.blend)")
     try:
         from . import blender
     except ImportError as exc:
@@ -140,38 +149,58 @@ def _open_scene(args, settings, bl_scene):
         bl_scene = blender.open_blend(Path(args.scene))
     t0 = time.perf_counter()
     from .memory import geometry_budget
+    created = []
     scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
-                                 max_bytes=geometry_budget(settings.memory_budget_mb) or None)
+                                 created, max_bytes=geometry_budget(settings.memory_budget_mb) or None)
+    if created and not args.save:
+        names = [name for name, _ in created]
+        warn(f"UV layer '{created[0][1]}' created on {', '.join(names[:5])}"
+             f"{f' and {len(names) - 5} more' if len(names) > 5 else ''} is not stored anywhere (no --save): "
+             "the lightmaps match it only in a scene saved with it (use --save, or add the layer in Blender)")
     _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
          f"baking {sum(o.bake for o in scene.objects)} objects")
     return blender, bl_scene, scene, out_dir, time.perf_counter() - t0
 
 
-def run_compare(args, bl_scene=None) -> int:
-    """The same photons through several estimators: their lightmaps, compare.png, compare.json."""
+def _check_cancel(cancel) -> None:
+    if cancel is not None and cancel():
+        raise BakeCancelled()
+
+
+def run_compare(args, bl_scene=None, cancel=None) -> dict:
+    """The same photons through several estimators: their lightmaps, compare.png, compare.json and
+    one report.json with a section per estimator, all written together."""
+    warn = output.Warnings()
     settings = settings_from_args(args)
     for name in args.estimators:
         replace(settings, estimator=name).validate()
-    blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
+    blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene, warn)
+    _check_cancel(cancel)
     from . import comparison
-    results = bake_mod.compute_many(scene, settings, args.estimators, StderrProgress(),
+    results = bake_mod.compute_many(scene, settings, args.estimators, StderrProgress(), cancel,
                                     cluster=getattr(args, "cluster", None))
     for result in results.values():
         result.seconds["export"] = export_seconds
-        bake_mod.write(result, out_dir)
+        output.warn_stale(out_dir, result, warn)
+    ours = list(warn)
+    for w in dict.fromkeys(w for r in results.values() for w in r.warnings):
+        warn(w)
+    for result in results.values():  # each section: the command line's warnings and its own
+        result.warnings = ours + result.warnings
     first = results[args.estimators[0]]
     seconds = {n: r.seconds["estimate"] for n, r in results.items()}
     picture, diffs = comparison.comparison_image({n: r.images for n, r in results.items()}, first.masks, seconds)
-    images.write_png(out_dir / "compare.png", picture)
     summary = {"estimators": args.estimators, "seconds": seconds, "difference_to_first": diffs,
-               "trace_seconds": first.seconds["trace"], "photons": first.stats.photons,
-               "files": {n: r.files for n, r in results.items()}}
-    (out_dir / "compare.json").write_text(json.dumps(summary, indent=2))
+               "trace_seconds": first.seconds["trace"], "photons": first.stats.photons}
+    extra = {"compare.png": lambda tmp: images.write_png(tmp, picture),
+             "compare.json": lambda tmp: tmp.write_text(json.dumps(
+                 {**summary, "files": {n: r.files for n, r in results.items()}}, indent=2))}
+    report = bake_mod.write_many(results, out_dir, StderrProgress(), cancel, extra=extra,
+                                 summary={"comparison": summary})
     for name in args.estimators:
         _log(f"{name}: estimate {seconds[name]:.2f} s, difference to {args.estimators[0]} {100 * diffs[name]:.1f} %")
-    print(out_dir / "compare.png")
-    print(out_dir / "compare.json")
-    return 0
+    return {"command": "compare", "files": {n: r.files for n, r in results.items()},
+            "extra": [str(out_dir / name) for name in extra], "report": str(report), "warnings": list(warn), **summary}
 
 
 def _log_noise(result) -> None:
@@ -183,25 +212,30 @@ def _log_noise(result) -> None:
              (f" (+{len(worst) - 8} more in report.json)" if len(worst) > 8 else ""))
 
 
-def run_bake(args, bl_scene=None) -> int:
-    """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene)."""
+def run_bake(args, bl_scene=None, cancel=None) -> dict:
+    """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene).
+    `cancel()` true stops it before anything is written. Returns the summary `main` prints."""
+    warn = output.Warnings()
     settings = settings_from_args(args)
-    blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
-    result = bake_mod.bake(scene, settings, out_dir, StderrProgress(), export_seconds=export_seconds,
-                           cluster=getattr(args, "cluster", None))
+    blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene, warn)
+    _check_cancel(cancel)
+    result = bake_mod.compute(scene, settings, StderrProgress(), cancel, cluster=getattr(args, "cluster", None))
+    result.seconds["export"] = export_seconds
     _log_noise(result)
+    output.warn_stale(out_dir, result, warn)
+    output.gather_warnings(result, warn)
+    report = bake_mod.write(result, out_dir, StderrProgress(), cancel)
+    # The files are in place: from here on a signal no longer undoes the bake.
+    saved = None
     if args.apply:
         blender.apply_all(bl_scene, result.files, args.uv_layer, settings.estimator)
     if args.save:
-        blender.save_blend(Path(args.save).resolve(), result.files)
-        print(f"detp_bake: saved {args.save}", file=sys.stderr)
-    for name, files in result.files.items():
-        for f in files:
-            print(f)
-    print(out_dir / "report.json")
-    if args.save:
-        print(Path(args.save).resolve())
-    return 0
+        saved = Path(args.save).resolve()
+        blender.save_blend(saved, result.files)
+        _log(f"saved {saved}")
+    return {"command": "bake", "files": result.files, "report": str(report), "saved": str(saved) if saved else None,
+            "estimator": settings.estimator, "photons": result.stats.photons, "stopped_by": result.stopped_by,
+            "noise": {n: round(100.0 * v, 3) for n, v in result.noise.items()}, "warnings": list(warn)}
 
 
 def _cluster(args):
@@ -225,16 +259,17 @@ def _cluster(args):
 def main(argv: Optional[Sequence[str]] = None, bl_scene=None) -> int:
     parser = build_parser(with_scene_path=bl_scene is None)
     args = parser.parse_args(argv)
-    try:
-        with _cluster(args) as args.cluster:
-            if args.command == "bake":
-                return run_bake(args, bl_scene)
-            if args.command == "compare":
-                return run_compare(args, bl_scene)
-    except BakeError as exc:
-        print(f"detp_bake: error: {exc}", file=sys.stderr)
-        return 2
-    except BakeCancelled:
-        print("detp_bake: cancelled; nothing written", file=sys.stderr)
-        return 130
-    return 1
+    run = {"bake": run_bake, "compare": run_compare}[args.command]
+    with interrupt.cancel_on_signals() as cancel:
+        try:
+            with output.quiet_stdout():  # Blender's own prints go to stderr
+                with _cluster(args) as args.cluster:
+                    summary = run(args, bl_scene, cancel)
+        except BakeError as exc:
+            print(f"detp_bake: error: {exc}", file=sys.stderr)
+            return 2
+        except (BakeCancelled, KeyboardInterrupt):
+            print("detp_bake: cancelled: nothing written", file=sys.stderr, flush=True)
+            return interrupt.EXIT_CODE
+    output.written(summary, args.json)
+    return 0
