@@ -124,7 +124,7 @@ def test_install_bake_disable_uninstall(bpy, built_zip, tmp_path):
 
     assert r["bake"] == ["FINISHED"], log
     assert r["exr"] and all(n.endswith(".exr") and (out / n).stat().st_size > 0 for n in r["exr"]), r["exr"]
-    assert {"embreex", "numba", "llvmlite", "OpenImageIO", "pyoidn"} <= set(r["imported_by_bake"])
+    assert {"embreex", "numba", "llvmlite", "OpenImageIO", "pyoidn"} <= set(r["imported_by_bake"]), log
     for name, path in r["module_files"].items():  # from the bundled wheels, nowhere else
         assert any(path.startswith(sp) for sp in r["wheel_site_packages"]), (name, path)
     # numba's cache: the extension's user folder, one subfolder per state of the core's sources.
