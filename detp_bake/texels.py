@@ -219,6 +219,19 @@ def rasterise(scene: Scene) -> TexelSet:
     return TexelSet(*cat, lightmaps=lightmaps)
 
 
+def select(texels: TexelSet, mask: np.ndarray) -> TexelSet:
+    """The texels where `mask` is set, as a TexelSet of their own: every lightmap keeps its place
+    (with the count of its texels kept, maybe 0), so per-lightmap values still broadcast."""
+    mask = np.asarray(mask, bool)
+    lightmaps, offset = [], 0
+    for lm in texels.lightmaps:
+        count = int(mask[lm.texels].sum())
+        lightmaps.append(Lightmap(lm.name, lm.object_index, lm.width, lm.height, offset, count, lm.texel_size))
+        offset += count
+    return TexelSet(texels.position[mask], texels.normal[mask], texels.triangle[mask], texels.pixel[mask],
+                    texels.area[mask], texels.centre_inside[mask], lightmaps)
+
+
 def to_image(values: np.ndarray, lm: Lightmap, pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Scatter one lightmap's texel values into an (H, W, C) image (row 0 = bottom) and its mask."""
     c = values.shape[1]

@@ -40,6 +40,16 @@ class Context:
     scene_radius: float = 1.0
     expected_segments: int = 0  # an estimate made before tracing, for work limits
     clearance: Optional[np.ndarray] = None  # per texel, free distance in its tangent plane (DETP discs)
+    frames: Optional["FrameState"] = None  # set when baking a frame range (frames.py)
+
+
+@dataclass
+class FrameState:
+    """What a frame range shares between its frames: which baked objects move over the range, and
+    what estimators keep from one frame to the next (by estimator name), such as the hybrid's index
+    over the static objects' discs."""
+    moving: frozenset = frozenset()
+    keep: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -93,4 +103,4 @@ def create(name: str, texels: TexelSet, settings: EstimatorSettings,
 
 
 def _load_all() -> None:
-    from . import detp, disc_index, photon_map, sphere_cache  # noqa: F401  (they register themselves)
+    from . import detp, disc_index, hybrid, photon_map, sphere_cache  # noqa: F401  (they register themselves)

@@ -263,6 +263,16 @@ class DiscIndex(Estimator):
         s["query_splat"] += t3 - t2
         s["query"] += t3 - t0
 
+    def reset(self) -> None:
+        """Forget the photons added so far and keep the index: the hybrid estimator splats every
+        frame of a range through one index over the static discs."""
+        self.acc[:] = 0.0
+        self.stats[:] = 0
+        self.bin_tests = 0
+        self.segments = 0
+        for key in ("query", "query_order", "query_bin", "query_splat"):
+            self.seconds[key] = 0.0
+
     def finish(self):
         t0 = time.perf_counter()
         out = np.empty_like(self.acc)
