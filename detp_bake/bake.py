@@ -176,13 +176,14 @@ def _cancel_fn(cancel) -> Callable[[], bool]:
 
 
 def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[Progress], None]] = None,
-            cancel=None) -> BakeResult:
-    """Trace, estimate and dilate; nothing touches the disk. Raises BakeError or BakeCancelled."""
-    return compute_many(scene, settings, [settings.estimator], progress, cancel)[settings.estimator]
+            cancel=None, frame_state: Optional[estimators.FrameState] = None) -> BakeResult:
+    """Trace, estimate and dilate; nothing touches the disk. Raises BakeError or BakeCancelled.
+    `frame_state`: one frame of a range (frames.py), shared by the range's frames."""
+    return compute_many(scene, settings, [settings.estimator], progress, cancel, frame_state)[settings.estimator]
 
 
 def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional[Callable[[Progress], None]] = None,
-                 cancel=None) -> dict:
+                 cancel=None, frame_state: Optional[estimators.FrameState] = None) -> dict:
     """Like `compute`, for several estimators fed the very same photons: every batch goes to each
     of them as it is traced. Returns {estimator name: BakeResult}. `settings.threads` (0: all
     cores) holds for tracing, shadow rays and the compiled estimators alike."""
@@ -191,12 +192,12 @@ def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional
     if settings.threads:
         numba.set_num_threads(max(1, min(int(settings.threads), numba.config.NUMBA_NUM_THREADS)))
     try:
-        return _compute_many(scene, settings, names, progress, cancel)
+        return _compute_many(scene, settings, names, progress, cancel, frame_state)
     finally:
         numba.set_num_threads(before)
 
 
-def _compute_many(scene, settings, names, progress, cancel) -> dict:
+def _compute_many(scene, settings, names, progress, cancel, frame_state=None) -> dict:
     names = list(dict.fromkeys(names))
     if settings.estimator_settings.radius_texels is None:
         texels_wide = estimators.RADIUS_TEXELS_INDIRECT if settings.direct == "sampled" else estimators.RADIUS_TEXELS_ALL
@@ -252,7 +253,7 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
         clearance = texels_mod.tangent_clearance(texels, scene.positions, radius, 0.5 * SLAB * radius)
     clearance_seconds = time.perf_counter() - t0
     context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
-                                 clearance=clearance)
+                                 clearance=clearance, frames=frame_state)
     runs, build = {}, {}
     for name in names:
         report(Progress("prepare", 0.5, f"Preparing {name}"))
@@ -384,32 +385,38 @@ def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) ->
     return need
 
 
-def output_paths(result: BakeResult, out_dir: Path) -> dict:
+def output_paths(result: BakeResult, out_dir: Path, frame: Optional[int] = None) -> dict:
+    """<object>.<estimator>.<format>, or <object>.<estimator>.<frame:04d>.<format> for a frame of a
+    range (the number last, as image sequences want it)."""
     stems = images.file_stems(result.images)
-    out = {name: [out_dir / f"{stems[name]}.{result.settings.estimator}.{fmt}"
+    number = "" if frame is None else f".{frame:04d}"
+    out = {name: [out_dir / f"{stems[name]}.{result.settings.estimator}{number}.{fmt}"
                   for fmt in result.settings.formats] for name in result.images}
     if result.settings.keep_raw and result.raw_images:
         for name, paths in out.items():
-            paths.append(out_dir / f"{stems[name]}.{result.settings.estimator}.raw.exr")
+            paths.append(out_dir / f"{stems[name]}.{result.settings.estimator}.raw{number}.exr")
     return out
 
 
 def write(result: BakeResult, out_dir: str | os.PathLike,
-          progress: Optional[Callable[[Progress], None]] = None, cancel=None) -> Path:
+          progress: Optional[Callable[[Progress], None]] = None, cancel=None,
+          frame: Optional[int] = None) -> Optional[Path]:
     """Write every lightmap and report.json; files appear together or not at all (a cancel
-    before the last file is staged removes the staged ones)."""
+    before the last file is staged removes the staged ones). For a `frame` of a range the names
+    carry its number and report.json is left to the range (frames.py): returns None."""
     t0 = time.perf_counter()
     cancelled = _cancel_fn(cancel)
     out = images.check_writable_dir(out_dir)
     report = progress or (lambda p: None)
-    paths = output_paths(result, out)
+    paths = output_paths(result, out, frame)
     staged = []
     try:
         for i, (name, targets) in enumerate(paths.items()):
             for target in targets:
                 fmt = target.suffix[1:]
                 tmp = target.with_name(f".{target.stem}.partial{target.suffix}")
-                picture = result.raw_images[name] if target.name.endswith(".raw.exr") else result.images[name]
+                raw = f".{result.settings.estimator}.raw." in target.name
+                picture = result.raw_images[name] if raw else result.images[name]
                 if fmt == "exr":
                     images.write_exr(tmp, picture, half=result.settings.half)
                 else:
@@ -426,6 +433,8 @@ def write(result: BakeResult, out_dir: str | os.PathLike,
         raise
     result.files = {name: [str(p) for p in targets] for name, targets in paths.items()}
     result.seconds["write"] = time.perf_counter() - t0
+    if frame is not None:
+        return None
     report_path = out / "report.json"
     tmp = out / ".report.partial.json"
     tmp.write_text(json.dumps(result.report(), indent=2))

@@ -74,6 +74,12 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--keep-raw", action="store_true",
                    help="also write each lightmap before denoising, as <object>.<estimator>.raw.exr")
     b.add_argument("--apply", action="store_true", help="wire the lightmaps into the materials")
+    b.add_argument("--frames", default=None, metavar="A-B[:STEP]",
+                   help="bake every frame of this range: <object>.<estimator>.<frame:04d>.exr")
+    b.add_argument("--moving", nargs="+", default=[], metavar="NAME",
+                   help="with --frames: treat these objects as moving (default: found by evaluating the frames)")
+    b.add_argument("--static", nargs="+", default=[], metavar="NAME",
+                   help="with --frames: treat these objects as static")
     b.add_argument("--save", default=None, metavar="OUT.blend", help="save the baked .blend here")
 
 
@@ -115,6 +121,18 @@ def _log(msg: str) -> None:
 
 def _open_scene(args, settings, bl_scene):
     """Check the inputs, open the .blend (unless Blender has one open) and export it."""
+    blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene)
+    t0 = time.perf_counter()
+    from .memory import geometry_budget
+    scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
+                                 max_bytes=geometry_budget(settings.memory_budget_mb) or None)
+    _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
+         f"baking {sum(o.bake for o in scene.objects)} objects")
+    return blender, bl_scene, scene, out_dir, time.perf_counter() - t0
+
+
+def _check_and_open(args, settings, bl_scene):
+    """Check the inputs and open the .blend (unless Blender has one open)."""
     settings.validate()
     if args.apply and "exr" not in settings.formats:
         raise BakeError("--apply needs the exr format in --format")
@@ -130,13 +148,7 @@ def _open_scene(args, settings, bl_scene):
                         "(make demo sets one up)") from None
     if bl_scene is None:
         bl_scene = blender.open_blend(Path(args.scene))
-    t0 = time.perf_counter()
-    from .memory import geometry_budget
-    scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
-                                 max_bytes=geometry_budget(settings.memory_budget_mb) or None)
-    _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
-         f"baking {sum(o.bake for o in scene.objects)} objects")
-    return blender, bl_scene, scene, out_dir, time.perf_counter() - t0
+    return blender, bl_scene, out_dir
 
 
 def run_compare(args, bl_scene=None) -> int:
@@ -177,6 +189,8 @@ def _log_noise(result) -> None:
 def run_bake(args, bl_scene=None) -> int:
     """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene)."""
     settings = settings_from_args(args)
+    if args.frames is not None or args.moving or args.static:
+        return run_frames(args, settings, bl_scene)
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
     result = bake_mod.bake(scene, settings, out_dir, StderrProgress(), export_seconds=export_seconds)
     _log_noise(result)
@@ -191,6 +205,36 @@ def run_bake(args, bl_scene=None) -> int:
     print(out_dir / "report.json")
     if args.save:
         print(Path(args.save).resolve())
+    return 0
+
+
+def run_frames(args, settings, bl_scene=None) -> int:
+    """--frames: every frame of the range (frames.py); a cancel keeps the frames finished."""
+    from . import frames
+    if args.frames is None:
+        raise BakeError("--moving and --static need --frames")
+    frame_range = frames.parse_frames(args.frames)
+    if args.apply:
+        raise BakeError("--apply is not available with --frames yet: load the image sequence by hand")
+    blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene)
+    from .memory import geometry_budget
+    scene_at = blender.frame_exporter(bl_scene, args.objects, args.uv_layer, settings.resolution, _log,
+                                      max_bytes=geometry_budget(settings.memory_budget_mb) or None)
+    with blender.frame_kept(bl_scene):
+        result = frames.bake_frames(scene_at, frame_range, settings, out_dir, StderrProgress(),
+                                    moving=args.moving, static=args.static, log=_log)
+    if args.save:
+        blender.save_blend(Path(args.save).resolve(), {})
+        _log(f"saved {args.save}")
+    for frame in result.frames:
+        for paths in result.files[frame].values():
+            for f in paths:
+                print(f)
+    if result.frames:
+        print(result.report_path)
+    if result.cancelled:
+        _log(f"cancelled; kept {len(result.frames)} finished frames of {len(frame_range.frames())}")
+        return 130
     return 0
 
 
