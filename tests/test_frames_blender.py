@@ -1,0 +1,60 @@
+"""Frame ranges through Blender: the quasi-static sample scene baked over frames with the hybrid
+estimator from the command line; moving objects found by evaluating the frames (a Wave modifier
+moves the table without any keyframe), --static overriding, and the user's frame given back."""
+import json
+
+import pytest
+
+from conftest import ROOT
+from detp_bake.cli import main
+
+QUASI_STATIC = ROOT / "sample_scenes" / "quasi_static.blend"
+FAST = ["--photons", "30000", "--resolution", "16", "--no-denoise", "--estimator", "hybrid"]
+
+
+def test_a_frame_range_from_the_command_line(tmp_path, capsys, bpy):
+    out = tmp_path / "out"
+    code = main(["bake", str(QUASI_STATIC), "--frames", "1-13:12", "--out", str(out), "--format", "exr,png", *FAST])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "found moving over the range: Mover" in err and "Frame 2/2 (#13) · Tracing" in err
+    report = json.loads((out / "report.json").read_text())
+    assert report["frames"]["done"] == [1, 13] and report["frames"]["moving"] == ["Mover"]
+    assert "Floor" in report["frames"]["static"] and "Table" in report["frames"]["static"]
+    assert [s["estimator"]["index_reused"] for s in report["per_frame"]] == [False, True]
+    for frame in (1, 13):
+        for ext in ("exr", "png"):
+            assert (out / f"Mover.hybrid.{frame:04d}.{ext}").stat().st_size > 0
+    assert bpy.context.scene.frame_current == 1
+
+
+def test_moving_found_by_evaluation_and_overrides(tmp_path, capsys, bpy):
+    bpy.ops.wm.open_mainfile(filepath=str(QUASI_STATIC))
+    scene = bpy.context.scene
+    table = scene.objects["Table"]
+    wave = table.modifiers.new("Wave", "WAVE")  # moves its vertices with time: no fcurve anywhere
+    wave.height, wave.width, wave.speed = 0.05, 0.5, 0.1
+    scene.frame_set(5)
+    out = tmp_path / "out"
+    code = main(["bake", "--frames", "1-4:3", "--out", str(out), "--static", "Mover", "--moving", "Ceiling", *FAST],
+                bl_scene=scene)
+    err = capsys.readouterr().err
+    assert code == 0, err
+    frames = json.loads((out / "report.json").read_text())["frames"]
+    assert frames["found_moving"] == ["Table", "Mover"]
+    assert frames["moving"] == ["Ceiling", "Table"] and "Mover" in frames["static"]
+    assert "static by --static: Mover" in err
+    assert scene.frame_current == 5  # the user's frame is given back
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--frames", "5-1"], "comes before"),
+    (["--moving", "Mover"], "need --frames"),
+    (["--frames", "1-2", "--moving", "Nobody"], "'Nobody'"),
+    (["--frames", "1-2", "--apply"], "--apply"),
+])
+def test_bad_frame_arguments_are_named_before_any_work(tmp_path, capsys, argv, message):
+    code = main(["bake", str(QUASI_STATIC), "--out", str(tmp_path / "out"), *FAST, *argv])
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "out" / "report.json").exists()
