@@ -58,6 +58,8 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--radius", type=float, default=None, help="DETP disc radius in metres (overrides texels)")
     b.add_argument("--q", type=float, default=0.65, help="sphere cache radius ratio (default 0.65)")
     b.add_argument("--kernel", default="constant", choices=("constant", "epanechnikov"))
+    b.add_argument("--hybrid-moving", default="sphere_cache", choices=("sphere_cache", "disc_index"),
+                   help="hybrid: estimator for the moving objects' texels (default sphere_cache, the paper's)")
     b.add_argument("--resolution", type=int, default=128, help="lightmap size in pixels (default 128)")
     b.add_argument("--margin", type=int, default=16, help="dilation margin in pixels (default 16)")
     b.add_argument("--bounces", type=int, default=None,
@@ -92,7 +94,8 @@ def settings_from_args(args) -> bake_mod.BakeSettings:
         resolution=args.resolution, margin=args.margin, formats=formats, half=args.half,
         threads=args.threads,
         estimator_settings=EstimatorSettings(k=args.k, radius_texels=args.radius_texels,
-                                             radius=args.radius, q=args.q, kernel=args.kernel))
+                                             radius=args.radius, q=args.q, kernel=args.kernel,
+                                             hybrid_moving=args.hybrid_moving))
 
 
 def _photons(args) -> int:

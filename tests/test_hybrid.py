@@ -31,13 +31,15 @@ def settings(name, **kw):
                         estimator_settings=EstimatorSettings(radius_texels=1.5), **kw)
 
 
-@pytest.mark.parametrize("direct", ["photons", "sampled"])
-def test_hybrid_equals_brute_force_on_every_frame(direct):
+@pytest.mark.parametrize("direct, moving", [("photons", "sphere_cache"), ("sampled", "disc_index")])
+def test_hybrid_equals_brute_force_on_every_frame(direct, moving):
     state = FrameState(moving=frozenset({"Ball"}))
     rerouted = []
     for frame in range(len(CENTRES)):
         ref = compute(scene_at(frame), settings("detp", direct=direct))
-        got = compute(scene_at(frame), settings("hybrid", direct=direct), frame_state=state)
+        hybrid = settings("hybrid", direct=direct)
+        hybrid.estimator_settings.hybrid_moving = moving
+        got = compute(scene_at(frame), hybrid, frame_state=state)
         c = got.counters
         assert c["index_reused"] == (frame > 0)  # the static discs are indexed once
         assert c["moving_texels"] == ref.texels.lightmaps[2].count
@@ -55,3 +57,11 @@ def test_hybrid_without_frames_is_the_disc_index():
     got = compute(scene_at(0), settings("hybrid", direct="photons"))
     assert got.counters["moving_texels"] == 0 and got.counters["static_texels"] == len(ref.texels)
     assert np.array_equal(got.value, ref.value)
+
+
+def test_an_unknown_moving_estimator_is_named_before_tracing():
+    from detp_bake.errors import BakeError
+    bad = settings("hybrid")
+    bad.estimator_settings.hybrid_moving = "photon_map"
+    with pytest.raises(BakeError, match="hybrid_moving"):
+        compute(scene_at(0), bad, frame_state=FrameState(moving=frozenset({"Ball"})))

@@ -28,6 +28,9 @@ class EstimatorSettings:
     radius: Optional[float] = None  # DETP family: disc radius in metres (overrides texels)
     q: float = 0.65  # sphere cache: ratio of successive sphere radii
     kernel: str = "constant"  # DETP family: constant or epanechnikov
+    # hybrid: the moving objects' texels by sphere_cache (the paper's choice) or by a disc index of
+    # their own, rebuilt every frame (measured faster here: benchmarks/frames.py)
+    hybrid_moving: str = "sphere_cache"
 
 
 RADIUS_TEXELS_INDIRECT = 3.0

@@ -3,7 +3,8 @@
 A frame range of a scene where most objects stand still and a few small ones move: the static
 objects' discs do not change from frame to frame, so they are indexed once (disc_index) and every
 frame's segments, traced through that frame's geometry, are splatted through the same index; the
-moving objects' texels, few, are estimated with the sphere cache over the same frame's segments.
+moving objects' texels, few, are estimated with the sphere cache over the same frame's segments
+(or, with `hybrid_moving` = disc_index, through a small index of their own built every frame).
 
 The index lives in the range's `FrameState` (frames.py) and is reused while the static discs stay
 what they were: a static texel whose disc is cut differently this frame (a mover came within its
@@ -23,7 +24,10 @@ from . import Context, Estimate, Estimator, EstimatorSettings, register
 from .disc_index import DiscIndex
 from .discs import Discs, make_discs
 from .sphere_cache import STREAM_SEGMENTS, SphereCache
+from ..errors import BakeError
 from ..texels import select
+
+MOVING = {"sphere_cache": SphereCache, "disc_index": DiscIndex}
 
 
 @dataclass
@@ -56,6 +60,8 @@ class Hybrid(Estimator):
 
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)
+        if settings.hybrid_moving not in MOVING:
+            raise BakeError(f"setting 'hybrid_moving' = {settings.hybrid_moving!r}: choose {' or '.join(MOVING)}")
         t0 = time.perf_counter()
         state = self.context.frames
         moving = state.moving if state is not None else frozenset()
@@ -88,8 +94,9 @@ class Hybrid(Estimator):
         self.rerouted = int(changed.sum())
         self.cache = None
         if self.cache_rows.size:
-            self.cache = SphereCache(select(texels, cached), settings, progress,
-                                     Context(scene_radius, self.context.expected_segments, part(cached)))
+            self.cache = MOVING[settings.hybrid_moving](select(texels, cached), settings, progress,
+                                                        Context(scene_radius, self.context.expected_segments,
+                                                                part(cached)))
         self.seconds_build = time.perf_counter() - t0
 
     def add(self, batch):
