@@ -157,6 +157,8 @@ def _check_and_open(args, settings, bl_scene):
 def run_compare(args, bl_scene=None) -> int:
     """The same photons through several estimators: their lightmaps, compare.png, compare.json."""
     settings = settings_from_args(args)
+    if args.frames is not None or args.moving or args.static:
+        raise BakeError("--frames, --moving and --static are for 'bake', not 'compare'")
     for name in args.estimators:
         replace(settings, estimator=name).validate()
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)

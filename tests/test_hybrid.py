@@ -45,6 +45,7 @@ def test_hybrid_equals_brute_force_on_every_frame(direct, moving):
         assert c["moving_texels"] == ref.texels.lightmaps[2].count
         assert c["static_texels"] == sum(lm.count for lm in ref.texels.lightmaps[:2])
         rerouted.append(c["rerouted_texels"])
+        assert 0 < c["moving_segments_near"] < c["segments"]  # only segments near the ball reach the cache
         if c["rerouted_texels"] == 0:
             assert c["crossings"] == ref.counters["crossings"] > 1000
         assert np.allclose(got.value, ref.value, rtol=1e-6, atol=0)

@@ -10,24 +10,29 @@ The index lives in the range's `FrameState` (frames.py) and is reused while the 
 what they were: a static texel whose disc is cut differently this frame (a mover came within its
 clearance, texels.tangent_clearance) is estimated by the sphere cache for that frame instead, and a
 change of the discs' ε or of the settings builds the index again. So every frame gives exactly the
-sums of `detp` over that frame's discs. Without a frame state (a single bake) every object counts as
-static, and the hybrid is the disc index.
+sums of `detp` over that frame's discs. Only the segments that enter boxes around those texels'
+discs go to the sphere cache, in their order, so its sums are unchanged and it does not scan the
+whole frame's segments for a small object. Without a frame state (a single bake) every object
+counts as static, and the hybrid is the disc index.
 """
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
+import numba
 import numpy as np
 
 from . import Context, Estimate, Estimator, EstimatorSettings, register
 from .disc_index import DiscIndex
 from .discs import Discs, make_discs
+from .morton import morton_order
 from .sphere_cache import STREAM_SEGMENTS, SphereCache
 from ..errors import BakeError
 from ..texels import select
 
 MOVING = {"sphere_cache": SphereCache, "disc_index": DiscIndex}
+BOX_DISCS = 256  # discs per box of the segment filter
 
 
 @dataclass
@@ -49,6 +54,39 @@ class _Kept:
         d = self.discs
         return ((d.centre != discs.centre).any(axis=1) | (d.normal != discs.normal).any(axis=1)
                 | (d.radius != discs.radius) | (d.slab != discs.slab))
+
+
+@numba.njit(cache=True, parallel=True)
+def _enter_boxes(o, w, length, eps, lo, hi, keep):
+    """keep[i]: segment i, for t in [0, length + eps], enters one of the boxes (lo, hi)."""
+    for i in numba.prange(o.shape[0]):
+        keep[i] = False
+        tmax = np.float64(length[i]) + eps
+        for b in range(lo.shape[0]):
+            tn, tf = 0.0, tmax
+            for c in range(3):
+                oc, wc = np.float64(o[i, c]), np.float64(w[i, c])
+                if wc == 0.0:
+                    if oc < lo[b, c] or oc > hi[b, c]:
+                        tn, tf = 1.0, 0.0
+                    continue
+                t0, t1 = (lo[b, c] - oc) / wc, (hi[b, c] - oc) / wc
+                tn, tf = max(tn, min(t0, t1)), min(tf, max(t0, t1))
+            if tn <= tf:
+                keep[i] = True
+                break
+
+
+def _boxes(discs: Discs) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes around the discs' cylinders, BOX_DISCS discs each in Morton order (tight round a mover
+    and round the few static texels near it, wherever they lie), padded against rounding."""
+    lo, hi = discs.bounds()
+    order = morton_order(discs.centre)
+    starts = np.arange(0, len(order), BOX_DISCS)
+    a = np.minimum.reduceat(lo[order], starts, axis=0)
+    b = np.maximum.reduceat(hi[order], starts, axis=0)
+    pad = 1e-6 * max(float(np.abs(np.r_[a, b]).max()), 1.0) + discs.eps
+    return a - pad, b + pad
 
 
 @register
@@ -93,23 +131,36 @@ class Hybrid(Estimator):
         self.cache_rows = np.flatnonzero(cached)
         self.rerouted = int(changed.sum())
         self.cache = None
+        self.kept_segments = 0
+        self.segments = 0
         if self.cache_rows.size:
-            self.cache = MOVING[settings.hybrid_moving](select(texels, cached), settings, progress,
+            cached_texels = select(texels, cached)
+            self.cache = MOVING[settings.hybrid_moving](cached_texels, settings, progress,
                                                         Context(scene_radius, self.context.expected_segments,
                                                                 part(cached)))
+            cached_discs = make_discs(cached_texels, settings, scene_radius, part(cached))
+            self.box_lo, self.box_hi = _boxes(cached_discs)
+            self.eps = cached_discs.eps
         self.seconds_build = time.perf_counter() - t0
 
     def add(self, batch):
+        self.segments += batch.segment_count
         if len(self.static_rows):
             self.index.add(batch)
-        if self.cache is not None:
-            self.cache.add(batch)
+        if self.cache is not None and batch.segment_count:
+            keep = np.empty(batch.segment_count, np.bool_)
+            _enter_boxes(batch.seg_origin, batch.seg_dir, batch.seg_length, self.eps, self.box_lo, self.box_hi, keep)
+            near = replace(batch, seg_origin=batch.seg_origin[keep], seg_dir=batch.seg_dir[keep],
+                           seg_length=batch.seg_length[keep], seg_flux=batch.seg_flux[keep])
+            self.kept_segments += near.segment_count
+            self.cache.add(near)
 
     def finish(self):
         out = np.zeros((len(self.texels), 3))
         counters = {"static_texels": int(len(self.static_rows)), "moving_texels": int(len(self.cache_rows)) -
                     self.rerouted, "rerouted_texels": self.rerouted, "index_reused": bool(self.reused),
-                    "seconds_build": self.seconds_build, "crossings": 0, "segments": 0}
+                    "seconds_build": self.seconds_build, "crossings": 0, "segments": self.segments,
+                    "moving_segments_near": self.kept_segments}
         parts = [("static", self.static_rows, self.index if len(self.static_rows) else None),
                  ("moving", self.cache_rows, self.cache)]
         for label, rows, est in parts:
@@ -117,7 +168,6 @@ class Hybrid(Estimator):
                 continue
             got = est.finish()
             out[rows] = got.irradiance
-            counters["segments"] = max(counters["segments"], got.counters.get("segments", 0))
             # Crossings of rerouted texels' indexed discs are counted too (they are not used).
             counters["crossings"] += got.counters.get("crossings", 0)
             counters.update({f"{label}_{k}": v for k, v in got.counters.items()})
