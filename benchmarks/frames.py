@@ -81,8 +81,11 @@ def main(argv=None):
     by_frame = frame_scenes(frames, args.resolution)
     # Warm numba's caches so the first frame is not a compile.
     warm = next(iter(by_frame.values()))
-    bake_mod.compute_many(warm, bake_mod.BakeSettings(photons=2_000, denoise=False, direct=args.direct), NAMES,
-                          frame_state=FrameState())
+    for moving in ("sphere_cache", "disc_index"):
+        bake_mod.compute_many(warm, bake_mod.BakeSettings(photons=2_000, denoise=False, direct=args.direct,
+                                                          estimator_settings=EstimatorSettings(hybrid_moving=moving)),
+                              NAMES, frame_state=FrameState(moving=frozenset(warm.objects[-1:] and
+                                                                             [warm.objects[-1].name])))
     out = {"scene": "quasi_static", "photons": args.photons, "resolution": args.resolution, "direct": args.direct,
            "runs": []}
     for r in args.radius_texels:

@@ -32,7 +32,7 @@ from ..errors import BakeError
 from ..texels import select
 
 MOVING = {"sphere_cache": SphereCache, "disc_index": DiscIndex}
-BOX_DISCS = 256  # discs per box of the segment filter
+BOX_DISCS = 4096  # discs per box of the segment filter, at most
 
 
 @dataclass
@@ -58,7 +58,8 @@ class _Kept:
 
 @numba.njit(cache=True, parallel=True)
 def _enter_boxes(o, w, length, eps, lo, hi, keep):
-    """keep[i]: segment i, for t in [0, length + eps], enters one of the boxes (lo, hi)."""
+    """keep[i]: segment i, for t in [0, length + eps], enters one of the boxes (lo, hi); box 0
+    holds all the others (a segment that misses it is done after one test)."""
     for i in numba.prange(o.shape[0]):
         keep[i] = False
         tmax = np.float64(length[i]) + eps
@@ -72,19 +73,28 @@ def _enter_boxes(o, w, length, eps, lo, hi, keep):
                     continue
                 t0, t1 = (lo[b, c] - oc) / wc, (hi[b, c] - oc) / wc
                 tn, tf = max(tn, min(t0, t1)), min(tf, max(t0, t1))
-            if tn <= tf:
+            if tn > tf:
+                if b == 0:
+                    break
+                continue
+            if b > 0:
                 keep[i] = True
                 break
 
 
 def _boxes(discs: Discs) -> tuple[np.ndarray, np.ndarray]:
-    """Boxes around the discs' cylinders, BOX_DISCS discs each in Morton order (tight round a mover
-    and round the few static texels near it, wherever they lie), padded against rounding."""
+    """Boxes around runs of the discs' cylinders in Morton order (tight round a mover and round the
+    few static texels near it, wherever they lie), after one box round them all; padded against
+    rounding."""
     lo, hi = discs.bounds()
     order = morton_order(discs.centre)
-    starts = np.arange(0, len(order), BOX_DISCS)
-    a = np.minimum.reduceat(lo[order], starts, axis=0)
-    b = np.maximum.reduceat(hi[order], starts, axis=0)
+    # A box also ends where the Z-curve jumps (more than a few discs' widths between neighbours),
+    # so no box spans the room between two far-apart groups of texels.
+    step = np.linalg.norm(np.diff(discs.centre[order], axis=0), axis=1)
+    jumps = np.flatnonzero(step > 4.0 * float(discs.radius.max())) + 1
+    starts = np.union1d(np.arange(0, len(order), BOX_DISCS), jumps)
+    a = np.concatenate([lo.min(axis=0)[None], np.minimum.reduceat(lo[order], starts, axis=0)])
+    b = np.concatenate([hi.max(axis=0)[None], np.maximum.reduceat(hi[order], starts, axis=0)])
     pad = 1e-6 * max(float(np.abs(np.r_[a, b]).max()), 1.0) + discs.eps
     return a - pad, b + pad
 
@@ -160,7 +170,8 @@ class Hybrid(Estimator):
         counters = {"static_texels": int(len(self.static_rows)), "moving_texels": int(len(self.cache_rows)) -
                     self.rerouted, "rerouted_texels": self.rerouted, "index_reused": bool(self.reused),
                     "seconds_build": self.seconds_build, "crossings": 0, "segments": self.segments,
-                    "moving_segments_near": self.kept_segments}
+                    "moving_segments_near": self.kept_segments,
+                    "moving_boxes": 0 if self.cache is None else len(self.box_lo) - 1}
         parts = [("static", self.static_rows, self.index if len(self.static_rows) else None),
                  ("moving", self.cache_rows, self.cache)]
         for label, rows, est in parts:
