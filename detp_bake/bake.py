@@ -236,8 +236,13 @@ def _compute_many(scene, settings, names, progress, cancel, frame_state=None) ->
             if cancelled():
                 raise BakeCancelled()
             report(Progress("direct", fraction, f"Direct light {100 * fraction:.0f} %"))
-        direct_e, info = direct_mod.direct_irradiance(scene, texels, caster, settings.direct_samples,
-                                                      settings.seed, tracer.threads, direct_progress, cancelled)
+        if frame_state is not None:  # a frame of a range: re-sampled only where it can change
+            from . import frame_direct
+            direct_e, info = frame_direct.direct_irradiance(frame_state, scene, texels, caster, settings.direct_samples,
+                                                            settings.seed, tracer.threads, direct_progress, cancelled)
+        else:
+            direct_e, info = direct_mod.direct_irradiance(scene, texels, caster, settings.direct_samples,
+                                                          settings.seed, tracer.threads, direct_progress, cancelled)
         direct_info.update(info)
 
     def estimate_progress(fraction):

@@ -92,6 +92,16 @@ def object_signatures(scene: Scene) -> dict[str, str]:
             for obj in scene.objects}
 
 
+def object_boxes(scene: Scene) -> dict[str, np.ndarray]:
+    """Each object's world-space bounding box, (2, 3): lo, hi."""
+    out = {}
+    for obj in scene.objects:
+        p = scene.positions[obj.triangles].reshape(-1, 3)
+        if len(p):
+            out[obj.name] = np.array([p.min(axis=0), p.max(axis=0)], np.float64)
+    return out
+
+
 def lights_signature(scene: Scene) -> str:
     """A hash of the lights and the world colour (an HDRI world counts by its identity)."""
     parts = [np.asarray(scene.world, np.float64)]
@@ -186,7 +196,7 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
         log("frames may stop at different photon counts (--target-noise/--time-limit): static regions then "
             "differ between frames")
     # 1. Evaluate every frame: what moves.
-    signatures, lights, kept, export_seconds = [], [], {}, {}
+    signatures, lights, kept, export_seconds, boxes = [], [], {}, {}, []
     held = 0
     for k, frame in enumerate(numbers):
         if cancelled():
@@ -196,6 +206,7 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
         scene = scene_at(frame)
         export_seconds[frame] = time.perf_counter() - t0
         signatures.append(object_signatures(scene))
+        boxes.append(object_boxes(scene))
         lights.append(lights_signature(scene))
         size = scene.positions.nbytes * 3
         if held + size <= SCENE_CACHE_BYTES:
@@ -205,7 +216,9 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
     log(motion.describe())
     evaluate_seconds = time.perf_counter() - t_start
     # 2. Bake frame after frame.
-    state = FrameState(moving=frozenset(motion.moving))
+    moving_boxes = [b[name] for b in boxes for name in motion.moving if name in b]
+    state = FrameState(moving=frozenset(motion.moving), lights_change=motion.lights_change,
+                       moving_boxes=np.array(moving_boxes, np.float64).reshape(-1, 2, 3))
     result = FramesResult([], {}, motion, False, out / "report.json")
     settings_report = None
     try:

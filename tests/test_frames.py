@@ -120,3 +120,21 @@ def test_texels_no_changed_path_reaches_are_identical_between_frames(tmp_path, d
         identical += int(same.sum())
         checked += len(same)
     assert identical > 0.5 * checked
+
+
+def test_direct_light_is_resampled_only_where_a_mover_can_shadow(tmp_path):
+    """A point light's shadow ray is one fixed ray per texel, so the direct light kept from the
+    first frame or re-sampled near the ball must equal a fresh bake of each frame bit for bit;
+    and most static texels are not re-sampled."""
+    got = frames.bake_frames(lambda f: scene_at(f, bounces=0), frames.parse_frames("0-2"),
+                             _settings(direct="sampled"), tmp_path)
+    from detp_bake.images import read_image
+    sections = json.loads((tmp_path / "report.json").read_text())["per_frame"]
+    for frame, section in zip(got.frames, sections):
+        fresh = compute(scene_at(frame, bounces=0), _settings(direct="sampled"))
+        d = section["direct"]
+        assert d["reused_texels"] + d["resampled_texels"] == len(fresh.texels)
+        assert d["reused_texels"] > 0.2 * len(fresh.texels)  # a big ball, three places, one lamp
+        for lm in fresh.texels.lightmaps:
+            img = read_image(tmp_path / f"{lm.name}.hybrid.{frame:04d}.exr")[..., :3]
+            assert np.array_equal(img, fresh.images[lm.name].astype(np.float32)), (frame, lm.name)

@@ -53,6 +53,10 @@ class FrameState:
     over the static objects' discs."""
     moving: frozenset = frozenset()
     keep: dict = field(default_factory=dict)
+    # Where the moving objects are: a box (lo, hi) per object and frame, (K, 2, 3); None: unknown.
+    # With the lights unchanged, direct light is re-sampled only near them (frame_direct.py).
+    moving_boxes: Optional[np.ndarray] = None
+    lights_change: bool = False
 
 
 @dataclass
