@@ -82,6 +82,8 @@ def _bake_arguments(b, with_scene_path):
                    help="with --frames: treat these objects as moving (default: found by evaluating the frames)")
     b.add_argument("--static", nargs="+", default=[], metavar="NAME",
                    help="with --frames: treat these objects as static")
+    b.add_argument("--force", action="store_true",
+                   help="with --frames: bake again frames unchanged since the last bake into --out (kept by default)")
     b.add_argument("--save", default=None, metavar="OUT.blend", help="save the baked .blend here")
 
 
@@ -157,8 +159,8 @@ def _check_and_open(args, settings, bl_scene):
 def run_compare(args, bl_scene=None) -> int:
     """The same photons through several estimators: their lightmaps, compare.png, compare.json."""
     settings = settings_from_args(args)
-    if args.frames is not None or args.moving or args.static:
-        raise BakeError("--frames, --moving and --static are for 'bake', not 'compare'")
+    if args.frames is not None or args.moving or args.static or args.force:
+        raise BakeError("--frames, --moving, --static and --force are for 'bake', not 'compare'")
     for name in args.estimators:
         replace(settings, estimator=name).validate()
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
@@ -194,7 +196,7 @@ def _log_noise(result) -> None:
 def run_bake(args, bl_scene=None) -> int:
     """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene)."""
     settings = settings_from_args(args)
-    if args.frames is not None or args.moving or args.static:
+    if args.frames is not None or args.moving or args.static or args.force:
         return run_frames(args, settings, bl_scene)
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
     result = bake_mod.bake(scene, settings, out_dir, StderrProgress(), export_seconds=export_seconds)
@@ -217,7 +219,7 @@ def run_frames(args, settings, bl_scene=None) -> int:
     """--frames: every frame of the range (frames.py); a cancel keeps the frames finished."""
     from . import frames
     if args.frames is None:
-        raise BakeError("--moving and --static need --frames")
+        raise BakeError("--moving, --static and --force need --frames")
     frame_range = frames.parse_frames(args.frames)
     if args.apply:
         raise BakeError("--apply is not available with --frames yet: load the image sequence by hand")
@@ -227,7 +229,7 @@ def run_frames(args, settings, bl_scene=None) -> int:
                                       max_bytes=geometry_budget(settings.memory_budget_mb) or None)
     with blender.frame_kept(bl_scene):
         result = frames.bake_frames(scene_at, frame_range, settings, out_dir, StderrProgress(),
-                                    moving=args.moving, static=args.static, log=_log)
+                                    moving=args.moving, static=args.static, log=_log, force=args.force)
     if args.save:
         blender.save_blend(Path(args.save).resolve(), {})
         _log(f"saved {args.save}")

@@ -88,7 +88,8 @@ def object_signatures(scene: Scene) -> dict[str, str]:
     normals, lightmap UVs, albedo, emission, texture and cut-out assignments."""
     per_triangle = [scene.positions, scene.normals, scene.uvs, scene.albedo, scene.emission, scene.tex_uvs,
                     scene.albedo_texture, scene.opacity, scene.opacity_texture]
-    return {obj.name: _digest([None if a is None else a[obj.triangles] for a in per_triangle] + [obj.bake])
+    return {obj.name: _digest([None if a is None else a[obj.triangles] for a in per_triangle] +
+                              [np.array([obj.bake, obj.resolution])])
             for obj in scene.objects}
 
 
@@ -173,6 +174,7 @@ class FramesResult:
     cancelled: bool
     report_path: Path
     sections: list = field(default_factory=list)  # report.json's per-frame sections
+    skipped: list = field(default_factory=list)  # frames kept from the last bake, unchanged
 
 
 def _frame_label(k: int, n: int, frame: int) -> str:
@@ -182,9 +184,13 @@ def _frame_label(k: int, n: int, frame: int) -> str:
 def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: bake_mod.BakeSettings,
                 out_dir, progress: Optional[Callable[[bake_mod.Progress], None]] = None, cancel=None,
                 moving: Iterable[str] = (), static: Iterable[str] = (),
-                log: Callable[[str], None] = lambda message: None) -> FramesResult:
+                log: Callable[[str], None] = lambda message: None, force: bool = False) -> FramesResult:
     """Bake every frame of `frames` into `out_dir`. `scene_at(frame)` returns the scene at a frame.
-    A cancel stops between frames' batches: the finished frames stay, with their report."""
+    A cancel stops between frames' batches: the finished frames stay, with their report.
+
+    A frame whose inputs (its evaluation's hashes, the lights, the settings, where the movers go
+    over the range) are those of the last bake into `out_dir`, and whose files are all there, is
+    not baked again but kept as it is (said, and marked in report.json); `force` bakes it anyway."""
     settings.validate()
     out = images.check_writable_dir(out_dir)
     report = progress or (lambda p: None)
@@ -207,7 +213,7 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
         export_seconds[frame] = time.perf_counter() - t0
         signatures.append(object_signatures(scene))
         boxes.append(object_boxes(scene))
-        lights.append(lights_signature(scene))
+        lights.append(lights_signature(scene) + f":{scene.default_bounces}")
         size = scene.positions.nbytes * 3
         if held + size <= SCENE_CACHE_BYTES:
             kept[frame] = scene
@@ -220,10 +226,28 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
     state = FrameState(moving=frozenset(motion.moving), lights_change=motion.lights_change,
                        moving_boxes=np.array(moving_boxes, np.float64).reshape(-1, 2, 3))
     result = FramesResult([], {}, motion, False, out / "report.json")
-    settings_report = None
+    previous, settings_report = ({}, None) if force else _previous(result.report_path)
+    # What a frame's numbers depend on beyond its own scene: where the movers go over the range
+    # (the hybrid's split, frame_direct's re-sampled texels) and whether the lights change.
+    range_key = _digest([state.moving_boxes, np.frombuffer(" ".join(sorted(state.moving)).encode(), np.uint8),
+                         np.array([state.lights_change])])
+    settings_key = json.dumps(asdict(settings), sort_keys=True, default=list)
+    skipped = []
     try:
         for k, frame in enumerate(numbers):
             label = _frame_label(k, n, frame)
+            inputs = _digest([np.frombuffer(f"{__version__}|{settings_key}|{range_key}|{lights[k]}|".encode() +
+                                            json.dumps(sorted(signatures[k].items())).encode(), np.uint8)])
+            old = previous.get(frame)
+            if old is not None and old.get("inputs") == inputs and all(
+                    os.path.isfile(f) for o in old["objects"] for f in o["files"]):
+                report(bake_mod.Progress("trace", 1.0, f"{label} · unchanged since the last bake: kept"))
+                result.sections.append({**old, "kept": True})
+                result.frames.append(frame)
+                result.files[frame] = {o["name"]: o["files"] for o in old["objects"]}
+                skipped.append(frame)
+                _write_report(result, frames, settings_report, evaluate_seconds, time.perf_counter() - t_start)
+                continue
 
             def framed(p, label=label):
                 report(bake_mod.Progress(p.phase, p.fraction, f"{label} · {p.message}"))
@@ -240,7 +264,7 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
             section = baked.report()
             section.pop("version")
             settings_report = section.pop("settings")
-            section["frame"] = frame
+            section = {"frame": frame, "inputs": inputs, "kept": False, **section}
             result.sections.append(section)
             result.frames.append(frame)
             result.files[frame] = baked.files
@@ -250,7 +274,34 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
         result.cancelled = True
         if result.frames:
             _write_report(result, frames, settings_report, evaluate_seconds, time.perf_counter() - t_start)
+    if skipped:
+        log(f"kept {len(skipped)} unchanged frame{'s' if len(skipped) > 1 else ''} from the last bake "
+            f"({_ranges(skipped)}); --force bakes them again")
+    result.skipped = skipped
     return result
+
+
+def _previous(path: Path) -> tuple[dict, Optional[dict]]:
+    """The frame sections of the report.json of an earlier bake into the same folder (and its
+    settings), when this version of detp_bake wrote it."""
+    try:
+        doc = json.loads(path.read_text())
+        if doc.get("version") != __version__:
+            return {}, None
+        return {int(s["frame"]): s for s in doc["per_frame"] if "inputs" in s}, doc["settings"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}, None
+
+
+def _ranges(numbers: list[int]) -> str:
+    parts, start = [], None
+    for i, f in enumerate(numbers):
+        if start is None:
+            start = f
+        if i + 1 == len(numbers) or numbers[i + 1] != f + 1:
+            parts.append(str(start) if start == f else f"{start}-{f}")
+            start = None
+    return ", ".join(parts)
 
 
 def _write_report(result: FramesResult, frames: FrameRange, settings: dict, evaluate_seconds: float,
@@ -263,6 +314,7 @@ def _write_report(result: FramesResult, frames: FrameRange, settings: dict, eval
             stems.setdefault(name, [re.sub(r"\.\d+(\.\w+)$", r".####\1", os.path.basename(p)) for p in paths])
     doc = {"version": __version__, "settings": settings,
            "frames": {"range": str(frames), "requested": frames.frames(), "done": list(result.frames),
+                      "kept": [s["frame"] for s in result.sections if s.get("kept")],
                       "cancelled": result.cancelled, "sequences": stems, **result.motion.report()},
            "estimator": estimator,
            "seconds": {"evaluate": evaluate_seconds, "total": total_seconds},

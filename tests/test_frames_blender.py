@@ -26,6 +26,8 @@ def test_a_frame_range_from_the_command_line(tmp_path, capsys, bpy):
         for ext in ("exr", "png"):
             assert (out / f"Mover.hybrid.{frame:04d}.{ext}").stat().st_size > 0
     assert bpy.context.scene.frame_current == 1
+    code = main(["bake", str(QUASI_STATIC), "--frames", "1-13:12", "--out", str(out), "--format", "exr,png", *FAST])
+    assert code == 0 and "kept 2 unchanged frames from the last bake (1, 13)" in capsys.readouterr().err
 
 
 def test_moving_found_by_evaluation_and_overrides(tmp_path, capsys, bpy):
@@ -50,6 +52,7 @@ def test_moving_found_by_evaluation_and_overrides(tmp_path, capsys, bpy):
 @pytest.mark.parametrize("argv, message", [
     (["--frames", "5-1"], "comes before"),
     (["--moving", "Mover"], "need --frames"),
+    (["--force"], "need --frames"),
     (["--frames", "1-2", "--moving", "Nobody"], "'Nobody'"),
     (["--frames", "1-2", "--apply"], "--apply"),
 ])
