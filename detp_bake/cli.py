@@ -221,8 +221,8 @@ def run_frames(args, settings, bl_scene=None) -> int:
     if args.frames is None:
         raise BakeError("--moving, --static and --force need --frames")
     frame_range = frames.parse_frames(args.frames)
-    if args.apply:
-        raise BakeError("--apply is not available with --frames yet: load the image sequence by hand")
+    if args.apply and frame_range.step != 1:
+        raise BakeError("--apply with --frames needs every frame (a step of 1): an image sequence has no gaps")
     blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene)
     from .memory import geometry_budget
     scene_at = blender.frame_exporter(bl_scene, args.objects, args.uv_layer, settings.resolution, _log,
@@ -230,8 +230,16 @@ def run_frames(args, settings, bl_scene=None) -> int:
     with blender.frame_kept(bl_scene):
         result = frames.bake_frames(scene_at, frame_range, settings, out_dir, StderrProgress(),
                                     moving=args.moving, static=args.static, log=_log, force=args.force)
+    if args.apply and result.frames:
+        # The frames finished, from the first on (a cancel keeps a shorter sequence).
+        first = result.frames[0]
+        last = max(f for i, f in enumerate(result.frames) if f == first + i)
+        blender.apply_all(bl_scene, result.files[first], args.uv_layer, settings.estimator, frames=(first, last))
+        _log(f"applied the lightmaps as image sequences, frames {first}-{last}")
     if args.save:
-        blender.save_blend(Path(args.save).resolve(), {})
+        blender.save_blend(Path(args.save).resolve(),
+                           {f"{name}@{frame}": paths for frame, files in result.files.items()
+                            for name, paths in files.items()})
         _log(f"saved {args.save}")
     for frame in result.frames:
         for paths in result.files[frame].values():

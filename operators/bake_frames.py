@@ -1,6 +1,7 @@
 """The Bake operator over a frame range (the panel's Frame Range): every frame is exported on the
 main thread first (bpy is not thread-safe), then the worker thread bakes them one after the other
-with frames.bake_frames; Esc keeps the frames already finished, as a shorter sequence."""
+with frames.bake_frames; Esc keeps the frames already finished, as a shorter sequence. With Apply
+After Bake (and a step of 1) the lightmaps go on as image sequences that follow the timeline."""
 import json
 
 from ..detp_bake import blender, frames
@@ -59,6 +60,13 @@ class FramesJob(BakeJob):
             else:
                 report({"WARNING"}, "Bake cancelled: no frame was finished")
             return {"CANCELLED"}
+        s = context.scene.detp_bake
+        if s.apply_after_bake and "exr" in self.settings.formats and self.frame_range.step == 1:
+            first = r.frames[0]
+            end = max(f for i, f in enumerate(r.frames) if f == first + i)
+            from . import common
+            uv = common.uv_layers([context.scene.objects[n] for n in self.objects if n in context.scene.objects])
+            blender.apply_all(context.scene, r.files[first], uv, self.settings.estimator, frames=(first, end))
         last = r.sections[-1]
         context.scene.detp_bake.last_report = json.dumps({
             "estimator": self.settings.estimator, "photons": last["photons"], "segments": last["segments"],

@@ -25,6 +25,12 @@ def test_bake_operator_over_a_frame_range(addon, bpy, tmp_path):  # noqa: F811
         assert (tmp_path / f"Floor.hybrid.{frame:04d}.exr").stat().st_size > 0
     assert scene.frame_current == 7
     assert json.loads(s.last_report)["frames"] == [1, 13]
+    assert "detp_bake lightmap" not in scene.objects["Floor"].material_slots[0].material.node_tree.nodes  # step 12
+    s.frame_start, s.frame_end, s.frame_step = 2, 3, 1
+    assert bpy.ops.detp_bake.bake() == {"FINISHED"}
+    nodes = scene.objects["Floor"].material_slots[0].material.node_tree.nodes
+    tex = next(n for n in nodes if n.type == "TEX_IMAGE" and n.image is not None and n.image.source == "SEQUENCE")
+    assert tex.image_user.frame_start == 2 and tex.image_user.frame_duration == 2
 
     from detp_bake_addon.ui import panels
     bpy.context.view_layer.objects.active = scene.objects["Table"]

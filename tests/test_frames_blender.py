@@ -54,10 +54,33 @@ def test_moving_found_by_evaluation_and_overrides(tmp_path, capsys, bpy):
     (["--moving", "Mover"], "need --frames"),
     (["--force"], "need --frames"),
     (["--frames", "1-2", "--moving", "Nobody"], "'Nobody'"),
-    (["--frames", "1-2", "--apply"], "--apply"),
+    (["--frames", "1-4:2", "--apply"], "a step of 1"),
 ])
 def test_bad_frame_arguments_are_named_before_any_work(tmp_path, capsys, argv, message):
     code = main(["bake", str(QUASI_STATIC), "--out", str(tmp_path / "out"), *FAST, *argv])
     assert code == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "out" / "report.json").exists()
+
+
+def test_applied_image_sequences_follow_the_timeline_and_revert_exactly(tmp_path, capsys, bpy):
+    from detp_bake import blender
+
+    out = tmp_path / "out"
+    code = main(["bake", str(QUASI_STATIC), "--frames", "3-5", "--out", str(out), "--apply", *FAST])
+    assert code == 0, capsys.readouterr().err
+    scene = bpy.context.scene
+    floor = scene.objects["Floor"]
+    mat = floor.material_slots[0].material
+    image = next(n for n in mat.node_tree.nodes if n.type == "TEX_IMAGE").image
+    assert image.source == "SEQUENCE"
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    for frame in (3, 4, 5):
+        scene.frame_set(frame)
+        shown = next(n for n in mat.evaluated_get(depsgraph).node_tree.nodes if n.type == "TEX_IMAGE")
+        assert shown.image_user.frame_current == frame
+        path = image.filepath_from_user(image_user=shown.image_user)  # the file Blender shows now
+        assert path == str(out / f"Floor.hybrid.{frame:04d}.exr")
+    for obj in scene.objects:
+        blender.revert(obj)
+    assert blender.FRAME_NAME not in mat.node_tree.nodes and "Floor.hybrid" not in bpy.data.images
