@@ -90,8 +90,6 @@ def test_first_and_a_later_frame_match_cycles(tmp_path, capsys, bpy):
     """The hybrid over a range against Cycles' own bake at the same frames: each object's mean
     within 3 % (the floor under the moving box, the box itself, the table; measured 0.984-1.015,
     where the box's own mean differs by 9 % between the two frames)."""
-    import numpy as np
-
     from detp_bake import blender
     from detp_bake.images import read_image
 
