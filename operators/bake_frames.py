@@ -4,7 +4,7 @@ with frames.bake_frames; Esc keeps the frames already finished, as a shorter seq
 After Bake (and a step of 1) the lightmaps go on as image sequences that follow the timeline."""
 import json
 
-from ..detp_bake import blender, frames
+from ..detp_bake import blender, frames, memory
 from ..detp_bake.errors import BakeCancelled, BakeError
 from .bake import BakeJob
 
@@ -28,6 +28,13 @@ class FramesJob(BakeJob):
                 context.scene.frame_set(frame)
                 super().prepare(context)
                 self.scenes[frame] = self.scene
+                held = sum(sc.positions.nbytes * 3 for sc in self.scenes.values())
+                free = memory.available_bytes()  # 0: cannot say
+                if free and held > 0.5 * free:
+                    blender.remove_uv_layers(context.scene, self.created_uv)
+                    raise BakeError(f"the frame range's exported scenes would need more than {held / 1e9:.1f} GB "
+                                    "of memory here: bake a shorter range, or from the command line (python -m "
+                                    "detp_bake bake --frames), which exports frame by frame")
         self.messages = list(dict.fromkeys(self.messages))  # each export says the same
         names = {o.name for scene in self.scenes.values() for o in scene.objects}
         self.moving = [n for n in self.moving if n in names]  # overrides on lights, empties, ... say nothing
