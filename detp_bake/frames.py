@@ -222,7 +222,9 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
     log(motion.describe())
     evaluate_seconds = time.perf_counter() - t_start
     # 2. Bake frame after frame.
-    moving_boxes = [b[name] for b in boxes for name in motion.moving if name in b]
+    # Shadows follow what really moves, whatever --static says: found and forced moving alike.
+    shadowing = [n for n in motion.objects if n in motion.found or n in motion.moving]
+    moving_boxes = [b[name] for b in boxes for name in shadowing if name in b]
     state = FrameState(moving=frozenset(motion.moving), lights_change=motion.lights_change,
                        moving_boxes=np.array(moving_boxes, np.float64).reshape(-1, 2, 3))
     result = FramesResult([], {}, motion, False, out / "report.json")
