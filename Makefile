@@ -9,6 +9,9 @@ VENV45 := .venv
 VENV52 := .venv-5.2
 export BLENDER_USER_RESOURCES ?= $(CURDIR)/.cache/blender-user
 PYTEST_ARGS ?=
+# numba's cache checks only the date of the file that holds a kernel, not of the files whose
+# helpers it inlines: a cache folder per state of the core's sources never serves stale code.
+CORE_HASH := $(shell cat $$(find detp_bake -name '*.py' | sort) | cksum | cut -d' ' -f1)
 DEMO_OUT ?= build/demo
 
 .PHONY: demo test test-4.5 test-5.2 bench bench-full clean env
@@ -29,12 +32,12 @@ $(VENV52)/.installed: requirements/blender-5.2.txt
 env: $(VENV45)/.installed
 
 demo: $(VENV45)/.installed
-	NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-4.5 $(VENV45)/bin/python -m detp_bake bake sample_scenes/cornell_box.blend \
+	NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-4.5-$(CORE_HASH) $(VENV45)/bin/python -m detp_bake bake sample_scenes/cornell_box.blend \
 		--estimator disc_index --photons 2000000 --resolution 128 --out $(DEMO_OUT) --format exr,png \
 		--apply --save $(DEMO_OUT)/cornell_box_baked.blend
 
 test-4.5: $(VENV45)/.installed
-	NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-4.5 $(VENV45)/bin/python -m pytest tests $(PYTEST_ARGS)
+	NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-4.5-$(CORE_HASH) $(VENV45)/bin/python -m pytest tests $(PYTEST_ARGS)
 
 test-5.2:
 	@if [ -z "$(PY313)" ]; then \
@@ -44,7 +47,7 @@ test-5.2:
 		if [ "$${CI:-}" = "true" ]; then exit 1; fi; \
 	else \
 		$(MAKE) --no-print-directory $(VENV52)/.installed && \
-		NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-5.2 $(VENV52)/bin/python -m pytest tests $(PYTEST_ARGS); \
+		NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-5.2-$(CORE_HASH) $(VENV52)/bin/python -m pytest tests $(PYTEST_ARGS); \
 	fi
 
 test: test-4.5 test-5.2

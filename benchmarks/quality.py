@@ -1,7 +1,7 @@
 """Lightmap quality per second: Cycles' bake (raw and through OIDN) against ours, every method in one
 run, against a converged Cycles reference on the same texels.
 
-    python benchmarks/quality.py [--quick | --full] [--scenes cornell_box,l_room,window_room,patio]
+    python benchmarks/quality.py [--quick | --full] [--scenes cornell_box,l_room,window_room,patio,courtyard]
                                  [--sweep-scene l_room | none] [--compositor-check]
                                  [--references-only] [--out DIR] [--figures DIR]
 
@@ -555,7 +555,7 @@ def main(argv=None):
     group = ap.add_mutually_exclusive_group()
     group.add_argument("--quick", action="store_true", help="seconds: checks that the script works")
     group.add_argument("--full", action="store_true", help="the full sweeps (hours on 2 cores)")
-    ap.add_argument("--scenes", default="cornell_box,l_room,window_room,patio", help="comma-separated, or none")
+    ap.add_argument("--scenes", default="cornell_box,l_room,window_room,patio,courtyard", help="comma-separated, or none")
     ap.add_argument("--sweep-scene", default="l_room", help="scene for the radius/shadow-ray sweeps, or none")
     ap.add_argument("--estimators", default=None, help="comma-separated subset of the configuration's estimators")
     ap.add_argument("--replot", metavar="JSON", default=None,

@@ -2,7 +2,6 @@
 deterministic ~100k-triangle room built with numpy alone."""
 from __future__ import annotations
 
-import contextlib
 import os
 import sys
 import tempfile
@@ -123,18 +122,8 @@ def dense_room(triangles: int = 100_000) -> Scene:
                  lights=lights, default_bounces=4)
 
 
-@contextlib.contextmanager
 def quiet_stdout():
-    """Cycles prints a line per object and phase to the process's stdout (fd 1, from C): send it
-    to /dev/null while a bake runs."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    null = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(null, 1)
-        yield
-    finally:
-        sys.stdout.flush()
-        os.dup2(saved, 1)
-        os.close(null)
-        os.close(saved)
+    """Cycles prints a line per object and phase to the process's stdout (fd 1, from C): discard it
+    while a bake runs (detp_bake.output does the redirection)."""
+    from detp_bake.output import quiet_stdout as redirect
+    return redirect(to="null")

@@ -8,6 +8,7 @@ exist, so an interrupted bake never leaves half a set of lightmaps.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import time
@@ -17,13 +18,14 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from . import __version__, denoise as denoise_mod, direct as direct_mod, estimators, images, memory, \
-    texels as texels_mod
+from . import __version__, denoise as denoise_mod, direct as direct_mod, estimators, images, interrupt, memory, \
+    staging, texels as texels_mod
 from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
 from .estimators.discs import SLAB, disc_radius
-from .photons import PhotonTracer, RayCaster, TraceStats
+from .estimators.rise import own_surface_rise
+from .photons import PhotonBatch, PhotonTracer, RayCaster, TraceStats
 from .scene import Scene
 
 MAX_PHOTONS = 1_000_000_000
@@ -132,6 +134,7 @@ class BakeResult:
     memory: dict = field(default_factory=dict)  # the estimate made before work, and the peak used
     export: dict = field(default_factory=dict)  # what the exporter found (instances, triangles, textures, …)
     raw_images: dict = field(default_factory=dict)  # object name -> image before denoising (when denoised)
+    cluster: dict = field(default_factory=dict)  # where the photons were traced when not here (distributed.py)
     warnings: list = field(default_factory=list)
     stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit
     share: float = 1.0  # the share of the photons traced (less than 1 when stopped early)
@@ -162,6 +165,7 @@ class BakeResult:
             "memory": self.memory,
             "export": self.export,
             "denoised": bool(self.raw_images),
+            **({"cluster": self.cluster} if self.cluster else {}),
             "warnings": list(self.warnings),
             "seconds": self.seconds,
         }
@@ -176,14 +180,16 @@ def _cancel_fn(cancel) -> Callable[[], bool]:
 
 
 def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[Progress], None]] = None,
-            cancel=None, frame_state: Optional[estimators.FrameState] = None) -> BakeResult:
+            cancel=None, cluster=None, frame_state: Optional[estimators.FrameState] = None) -> BakeResult:
     """Trace, estimate and dilate; nothing touches the disk. Raises BakeError or BakeCancelled.
+    `cluster` (a distributed.Cluster) traces the photons on its workers instead of here.
     `frame_state`: one frame of a range (frames.py), shared by the range's frames."""
-    return compute_many(scene, settings, [settings.estimator], progress, cancel, frame_state)[settings.estimator]
+    return compute_many(scene, settings, [settings.estimator], progress, cancel, cluster,
+                        frame_state)[settings.estimator]
 
 
 def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional[Callable[[Progress], None]] = None,
-                 cancel=None, frame_state: Optional[estimators.FrameState] = None) -> dict:
+                 cancel=None, cluster=None, frame_state: Optional[estimators.FrameState] = None) -> dict:
     """Like `compute`, for several estimators fed the very same photons: every batch goes to each
     of them as it is traced. Returns {estimator name: BakeResult}. `settings.threads` (0: all
     cores) holds for tracing, shadow rays and the compiled estimators alike."""
@@ -192,12 +198,12 @@ def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional
     if settings.threads:
         numba.set_num_threads(max(1, min(int(settings.threads), numba.config.NUMBA_NUM_THREADS)))
     try:
-        return _compute_many(scene, settings, names, progress, cancel, frame_state)
+        return _compute_many(scene, settings, names, progress, cancel, cluster, frame_state)
     finally:
         numba.set_num_threads(before)
 
 
-def _compute_many(scene, settings, names, progress, cancel, frame_state=None) -> dict:
+def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_state=None) -> dict:
     names = list(dict.fromkeys(names))
     if settings.estimator_settings.radius_texels is None:
         texels_wide = estimators.RADIUS_TEXELS_INDIRECT if settings.direct == "sampled" else estimators.RADIUS_TEXELS_ALL
@@ -205,6 +211,7 @@ def _compute_many(scene, settings, names, progress, cancel, frame_state=None) ->
     for name in names:
         replace(settings, estimator=name).validate()
     scene.check()
+    scene, offset = scene.recentred()  # float32 rays and discs work near the origin (scene.py)
     report = progress or (lambda p: None)
     cancelled = _cancel_fn(cancel)
     t_start = time.perf_counter()  # the time limit counts the whole bake
@@ -251,14 +258,15 @@ def _compute_many(scene, settings, names, progress, cancel, frame_state=None) ->
         report(Progress("estimate", fraction, f"Estimating {100 * fraction:.0f} %"))
 
     expected_segments = int(tracer.photons * per_photon_kept)
-    clearance = None
+    clearance = rise = None
     t0 = time.perf_counter()
     if discs:
         report(Progress("prepare", 0.0, "Measuring disc clearance"))
         clearance = texels_mod.tangent_clearance(texels, scene.positions, radius, 0.5 * SLAB * radius)
+        rise = own_surface_rise(texels, scene, radius)
     clearance_seconds = time.perf_counter() - t0
     context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
-                                 clearance=clearance, frames=frame_state)
+                                 clearance=clearance, rise=rise, frames=frame_state)
     runs, build = {}, {}
     for name in names:
         report(Progress("prepare", 0.5, f"Preparing {name}"))
@@ -266,51 +274,67 @@ def _compute_many(scene, settings, names, progress, cancel, frame_state=None) ->
         runs[name] = estimators.create(name, texels, settings.estimator_settings, estimate_progress, context)
         build[name] = time.perf_counter() - t1
     spent = {name: 0.0 for name in names}
-    # Noise from the spread between groups of batches, for the estimators that stream (a group
-    # closes once an estimator has consumed everything it was given).
+    # Noise from the spread between blocks of batches, for the estimators that stream.
     noise = {name: BatchNoise(len(texels)) for name, est in runs.items() if est.streaming}
-    since = {name: 0 for name in noise}  # segments since each one's last reading
+    blocks = _blocks(tracer, runs, expected_segments)
     primary = names[0]
     total = tracer.photons
     stopped_by = "photons"
     current = {}
-    for batch in tracer.batches(cancelled):
-        t_batch = time.perf_counter()
-        for name, est in runs.items():
-            t1 = time.perf_counter()
-            est.add(batch)
-            if name in noise:
-                since[name] += batch.segment_count
-                if since[name] >= min(est.group_segments, expected_segments // 16):
-                    noise[name].update(est.finish().irradiance, tracer.share)
-                    since[name] = 0
-            spent[name] += time.perf_counter() - t1
-        done = tracer.stats.photons
-        message = f"Tracing {_si(done)}/{_si(total)} photons"
-        if primary in noise and noise[primary].groups >= 2:
-            direct_now = 0.0 if direct_e is None else direct_e
-            current = noise[primary].relative(texels.lightmaps, direct_now + noise[primary].previous[:, None] /
-                                              max(tracer.share, 1e-300))
+    totals = Totals(names)
+
+    shown = [0]
+
+    def trace_progress(photons):
+        photons = shown[0] = max(shown[0], photons)  # units may finish out of order
+        message = f"Tracing {_si(photons)}/{_si(total)} photons"
+        if current:
             message += f" · noise {100 * max(current.values(), default=0.0):.2g} %"
-        report(Progress("trace", done / total, message))
-        if cancelled():
-            raise BakeCancelled()
-        elapsed = time.perf_counter() - t_start
-        if settings.time_limit and elapsed + (time.perf_counter() - t_batch) > settings.time_limit:
-            stopped_by = "time_limit"
-            break
-        if settings.target_noise and noise.get(primary) is not None and noise[primary].groups >= MIN_GROUPS \
-                and max(current.values(), default=0.0) * 100 <= settings.target_noise:
-            stopped_by = "target_noise"
-            break
+        report(Progress("trace", photons / total, message))
+
+    if cluster is None:
+        def over_time(batch_seconds):  # the next batch would take about as long as the last
+            return bool(settings.time_limit) and time.perf_counter() - t_start + batch_seconds > settings.time_limit
+        traced = [0]
+
+        def on_batch(batch):
+            traced[0] += batch.photons
+            trace_progress(traced[0])
+        partials = (trace_batches(tracer, runs, block, cancelled, over_time, on_batch) for block in blocks)
+    else:  # the same runs of batches on a cluster's workers (distributed.py), in batch order
+        job = TraceJob(scene, texels, settings, names, bounces, batch_size, reach, context)
+        partials = cluster.partials(job, blocks, cancelled, trace_progress, _worker_bytes(need, texels, runs, blocks))
+    with contextlib.closing(iter(partials)) as partials:
+        for part in partials:
+            totals.add(part)
+            share = tracer.schedule.share(totals.batches)
+            for name in noise:
+                noise[name].update(totals.sums[name]["irradiance"], share)
+            if primary in noise and noise[primary].groups >= 2:
+                direct_now = 0.0 if direct_e is None else direct_e
+                current = noise[primary].relative(texels.lightmaps, direct_now + noise[primary].previous[:, None] /
+                                                  max(share, 1e-300))
+            trace_progress(totals.stats.photons)
+            if cancelled():
+                raise BakeCancelled()
+            over = part.stopped or (settings.time_limit and time.perf_counter() - t_start > settings.time_limit)
+            if over and totals.batches < tracer.batch_count:
+                stopped_by = "time_limit"
+                break
+            if settings.target_noise and noise.get(primary) is not None and noise[primary].groups >= MIN_GROUPS \
+                    and max(current.values(), default=0.0) * 100 <= settings.target_noise:
+                stopped_by = "target_noise"
+                break
+    tracer.stats, tracer.batches_done = totals.stats, totals.batches
+    for name, est in runs.items():
+        est.absorb(totals.sums[name])
+        spent[name] += totals.seconds[name]
     share = tracer.share
     estimate_progress(0.0)
     results = {}
     for name, est in runs.items():
         t1 = time.perf_counter()
         out = est.finish()
-        if name in noise and since[name] > 0:
-            noise[name].update(out.irradiance, share)
         if share < 1.0:  # stopped early: the batches so far stand for the whole bake
             out.irradiance = out.irradiance / share
         spent[name] += time.perf_counter() - t1
@@ -322,6 +346,7 @@ def _compute_many(scene, settings, names, progress, cancel, frame_state=None) ->
         result.stopped_by = stopped_by
         result.share = share
         result.export = dict(getattr(scene, "export_stats", None) or {})
+        result.cluster = dict(cluster.last) if cluster is not None else {}
         result.memory = {"estimate_mb": round(need.total / 1e6, 1),
                          "parts_mb": {k: round(v / 1e6, 1) for k, v in need.parts.items()},
                          "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": batch_size}
@@ -330,8 +355,170 @@ def _compute_many(scene, settings, names, progress, cancel, frame_state=None) ->
         elif name == "photon_map":  # DESIGN.md §2: about 1/√(k − 1) whatever the photon count
             k = settings.estimator_settings.k
             result.noise = {lm.name: 1.0 / np.sqrt(k - 1) for lm in texels.lightmaps}
+        result.warnings.extend(layout_warnings(texels, settings.estimator_settings,
+                                               radius if name != "photon_map" else None))
+        k = settings.estimator_settings.k
+        if name == "photon_map" and result.counters.get("hits", k) < k:
+            result.warnings.append(f"setting 'k' = {k} is more than the {result.counters['hits']:,} photons the "
+                                   "photon map stored: every texel averaged all of them (a blur over the scene); "
+                                   "trace more photons or lower k")
         results[name] = result
+    if offset.any():
+        texels.position += offset  # back where the texels are, in world space
     return results
+
+
+@dataclass
+class Partial:
+    """What a run of consecutive batches adds to a bake, summed from zero: tracing counts and flux,
+    and per estimator its `take()` sums and the seconds it spent. Plain data (`plain`), so it
+    crosses to a client that imports this package under another name (Blender's bl_ext)."""
+    first: int  # first batch number
+    batches: int  # batches traced
+    stats: TraceStats
+    sums: dict  # estimator name -> Estimator.take()
+    seconds: dict  # estimator name -> seconds in add and take
+    stopped: bool = False  # `stop` said to stop the bake after this run (time limit)
+
+    def plain(self) -> dict:
+        return {**vars(self), "stats": vars(self.stats)}
+
+    @classmethod
+    def from_plain(cls, d: dict) -> "Partial":
+        return cls(**{**d, "stats": TraceStats(**d["stats"])})
+
+
+class Totals:
+    """A bake's sums, partials added in batch order: the same additions in the same order whoever
+    traced the batches, so the lightmaps are identical bit for bit."""
+
+    def __init__(self, names):
+        self.stats = TraceStats()
+        self.sums = {name: {} for name in names}
+        self.seconds = dict.fromkeys(names, 0.0)
+        self.batches = 0
+
+    def add(self, part: Partial) -> None:
+        if part.first != self.batches:
+            raise ValueError(f"batch {part.first} added after {self.batches} batches")
+        self.stats.add(part.stats)
+        for name, sums in part.sums.items():
+            total = self.sums[name]
+            for key, value in sums.items():
+                if key in total:
+                    total[key] += value
+                else:  # a copy: what came over the wire may be read-only
+                    total[key] = value.copy() if isinstance(value, (np.ndarray, list)) else value
+            self.seconds[name] += part.seconds[name]
+        self.batches += part.batches
+
+
+def trace_batches(tracer: PhotonTracer, runs: dict, indices: range, cancel=None,
+                  stop: Optional[Callable[[float], bool]] = None,
+                  on_batch: Optional[Callable[[PhotonBatch], None]] = None) -> Partial:
+    """Trace batches `indices` (consecutive batch numbers) into every estimator of `runs` and hand
+    over their sums. The local bake and a cluster's workers (distributed.py) both bake through this,
+    a block of batches at a time (`_blocks`). `stop(seconds the batch took)` ends the run early."""
+    tracer.stats = TraceStats()
+    seconds = dict.fromkeys(runs, 0.0)
+    done, stopped = 0, False
+    with contextlib.closing(tracer.batches(cancel, indices)) as batches:
+        t0 = time.perf_counter()
+        for batch in batches:
+            for name, est in runs.items():
+                t1 = time.perf_counter()
+                est.add(batch)
+                seconds[name] += time.perf_counter() - t1
+            done += 1
+            if on_batch is not None:
+                on_batch(batch)
+            if stop is not None and stop(time.perf_counter() - t0):
+                stopped = True
+                break
+            t0 = time.perf_counter()
+    sums = {}
+    for name, est in runs.items():
+        t1 = time.perf_counter()
+        sums[name] = est.take()
+        seconds[name] += time.perf_counter() - t1
+    return Partial(indices[0], done, tracer.stats, sums, seconds, stopped)
+
+
+def _blocks(tracer: PhotonTracer, runs: dict, expected_segments: int) -> list[range]:
+    """The bake's batches in blocks, each estimated from zero and read for noise once done: as
+    many segments as a streaming estimator gathers before it works through them, and at most a
+    sixteenth of the bake (the disc index works batch by batch: blocks of one). Fixed by the
+    settings and the scene alone, so a cluster sums exactly what a local bake sums."""
+    count = tracer.batch_count
+    gather = max((est.group_segments for est in runs.values() if est.streaming), default=0)
+    per_batch = max(expected_segments / count, 1.0)
+    size = max(1, int(min(gather, expected_segments // 16) / per_batch))
+    return [range(a, min(a + size, count)) for a in range(0, count, size)]
+
+
+def _worker_bytes(need: memory.Estimate, texels, runs, blocks) -> tuple[int, int]:
+    """(bytes a worker keeps for a bake, bytes one block's sums add), for sizing a cluster's units."""
+    fixed = need.total - need.parts.get("photon map hits", 0) - need.parts["lightmap images"]
+    per_block = sum(len(texels) * 3 * 8 for est in runs.values() if est.streaming)
+    if "photon_map" in runs and blocks:
+        per_block += need.parts.get("photon map hits", 0) // len(blocks)
+    return int(fixed), int(per_block)
+
+
+@dataclass
+class TraceJob:
+    """A bake's tracing and estimation inputs, plain data: what a cluster's worker needs to trace
+    any of the bake's batches exactly as the local bake would (distributed.py)."""
+    scene: Scene
+    texels: texels_mod.TexelSet
+    settings: BakeSettings
+    names: list
+    bounces: int
+    batch_size: int
+    margin: float  # how far past the geometry sun photons start (the discs' reach)
+    context: estimators.Context
+
+    def tracer(self, threads: int = 0) -> PhotonTracer:
+        s = self.settings
+        return PhotonTracer(self.scene, s.photons, self.bounces, s.seed, self.batch_size, threads or s.threads,
+                            indirect_only=s.direct == "sampled", margin=self.margin)
+
+    def estimators(self) -> dict:
+        return {name: estimators.create(name, self.texels, self.settings.estimator_settings, None, self.context)
+                for name in self.names}
+
+
+OVERLAP_WARNING = 0.01  # a share of texels: Smart UV Project may fold a bent quad over a texel or two
+OUTSIDE_WARNING = 0.001  # a share of UV area
+
+
+def layout_warnings(texels, estimator_settings, radius=None) -> list:
+    """What would make lightmaps silently wrong: overlapping lightmap UVs, UVs outside 0..1, and
+    (`radius`: the DETP discs' radius per texel) discs wider than the objects they lie on."""
+    out = []
+    for lm in texels.lightmaps:
+        if lm.overlap >= OVERLAP_WARNING:
+            out.append(f"object '{lm.name}': {100 * lm.overlap:.0f} % of its lightmap texels lie under two or more "
+                       "faces (overlapping lightmap UVs, e.g. Array or Mirror copies sharing them): those faces get "
+                       "one shared value; give every face its own UV space (Lightmap Pack)")
+        if lm.outside >= OUTSIDE_WARNING:
+            out.append(f"object '{lm.name}': {100 * lm.outside:.1f} % of its lightmap UV area lies outside 0..1 and is "
+                       "not baked: unwrap it into 0..1 (Lightmap Pack)")
+    if radius is not None and len(texels):
+        wide = []
+        for lm in texels.lightmaps:
+            pos = texels.position[lm.texels]
+            across = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0)))
+            r = float(np.min(radius[lm.texels]))
+            if r >= across:
+                wide.append(f"'{lm.name}' ({r:.3g} m against {across:.3g} m)")
+        if wide:
+            setting = ("radius", estimator_settings.radius) if estimator_settings.radius is not None else \
+                ("radius_texels", estimator_settings.radius_texels)
+            out.append(f"setting '{setting[0]}' = {setting[1]:g}: every disc is wider than the object it lies on "
+                       f"for {', '.join(wide[:5])}{' …' if len(wide) > 5 else ''}, so each such lightmap is one "
+                       f"blurred average: lower {setting[0]}")
+    return out
 
 
 def _finish(settings, bounces, texels, est, tracer, seconds, direct_e=None, direct_info=None) -> BakeResult:
@@ -350,7 +537,9 @@ def _finish(settings, bounces, texels, est, tracer, seconds, direct_e=None, dire
         raw = texels_mod.dilate(img, mask, settings.margin)
         if denoise:
             raw_images[lm.name] = raw
-            result_images[lm.name] = denoise_mod.denoise_lightmap(img, mask, margin=settings.margin)
+            area, _ = texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)
+            result_images[lm.name] = denoise_mod.denoise_lightmap(img, mask, margin=settings.margin,
+                                                                  weights=area[..., 0])
         else:
             result_images[lm.name] = raw
         masks[lm.name] = mask
@@ -406,56 +595,75 @@ def output_paths(result: BakeResult, out_dir: Path, frame: Optional[int] = None)
 def write(result: BakeResult, out_dir: str | os.PathLike,
           progress: Optional[Callable[[Progress], None]] = None, cancel=None,
           frame: Optional[int] = None) -> Optional[Path]:
-    """Write every lightmap and report.json; files appear together or not at all (a cancel
-    before the last file is staged removes the staged ones). For a `frame` of a range the names
-    carry its number and report.json is left to the range (frames.py): returns None."""
+    """Write every lightmap and report.json; files appear together or not at all. For a `frame` of
+    a range the names carry its number and report.json is left to the range (frames.py)."""
+    return write_many({result.settings.estimator: result}, out_dir, progress, cancel, frame=frame)
+
+
+def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Callable[[Progress], None]] = None,
+               cancel=None, extra: Optional[dict] = None, summary: Optional[dict] = None,
+               frame: Optional[int] = None) -> Optional[Path]:
+    """Write the lightmaps of one or more results ({estimator: BakeResult}, as `compute_many`
+    gives), `extra` files ({file name: write(path)}) and one report.json: a single result's report,
+    or (several results, or a `summary` given) `summary` and a section per estimator. Everything is staged under hidden
+    temporary names and renamed at the end (staging.py): a cancel, a full disk or any error
+    before then leaves the folder as it was. Other files in the folder are left alone."""
     t0 = time.perf_counter()
     cancelled = _cancel_fn(cancel)
     out = images.check_writable_dir(out_dir)
     report = progress or (lambda p: None)
-    paths = output_paths(result, out, frame)
-    staged = []
+    paths = {name: output_paths(r, out, frame) for name, r in results.items()}
+    count = sum(len(p) for p in paths.values())
+    done = 0
     try:
-        for i, (name, targets) in enumerate(paths.items()):
-            for target in targets:
-                fmt = target.suffix[1:]
-                tmp = target.with_name(f".{target.stem}.partial{target.suffix}")
-                raw = f".{result.settings.estimator}.raw." in target.name
-                picture = result.raw_images[name] if raw else result.images[name]
-                if fmt == "exr":
-                    images.write_exr(tmp, picture, half=result.settings.half)
-                else:
-                    images.WRITERS[fmt](tmp, picture)
-                staged.append((tmp, target))
-            report(Progress("write", (i + 1) / len(paths), f"Writing {name}"))
+        with staging.FileSet(out) as files:
+            for estimator, result in results.items():
+                for name, targets in paths[estimator].items():
+                    for target in targets:
+                        fmt = target.suffix[1:]
+                        raw = f".{result.settings.estimator}.raw." in target.name
+                        picture = result.raw_images[name] if raw else result.images[name]
+                        half = result.settings.half
+                        files.stage(target.name, lambda tmp: images.write_exr(tmp, picture, half=half)
+                                    if fmt == "exr" else images.WRITERS[fmt](tmp, picture))
+                        done += 1
+                        interrupt.hold("write", cancelled)
+                        if cancelled():
+                            raise BakeCancelled()
+                    report(Progress("write", done / max(count, 1), f"Writing {name}"))
+            for estimator, result in results.items():
+                result.files = {name: [str(p) for p in targets] for name, targets in paths[estimator].items()}
+            for name, write_file in (extra or {}).items():  # these may read the results' files
+                files.stage(name, write_file)
+            seconds = time.perf_counter() - t0
+            for result in results.values():
+                result.seconds["write"] = seconds
+            if frame is not None:
+                pass  # a frame of a range: its report.json is the range's (frames.py)
+            elif summary is None and len(results) == 1:
+                content = next(iter(results.values())).report()
+            else:
+                content = {"version": __version__, **(summary or {}),
+                           "estimators": {name: r.report() for name, r in results.items()}}
+            if frame is None:
+                files.stage_text("report.json", json.dumps(content, indent=2))
             if cancelled():
                 raise BakeCancelled()
-        for tmp, target in staged:
-            os.replace(tmp, target)
-    except BaseException:
-        for tmp, _ in staged:
-            Path(tmp).unlink(missing_ok=True)
-        raise
-    result.files = {name: [str(p) for p in targets] for name, targets in paths.items()}
-    result.seconds["write"] = time.perf_counter() - t0
-    if frame is not None:
-        return None
-    report_path = out / "report.json"
-    tmp = out / ".report.partial.json"
-    tmp.write_text(json.dumps(result.report(), indent=2))
-    os.replace(tmp, report_path)
-    return report_path
+            files.commit()
+    except OSError as exc:  # a full disk, a folder gone: nothing of this set is left
+        raise BakeError(f"cannot write '{exc.filename or out}': {exc.strerror or exc}") from None
+    return None if frame is not None else out / "report.json"
 
 
 def bake(scene: Scene, settings: BakeSettings, out_dir: str | os.PathLike,
          progress: Optional[Callable[[Progress], None]] = None, cancel=None,
-         export_seconds: float = 0.0) -> BakeResult:
+         export_seconds: float = 0.0, cluster=None) -> BakeResult:
     """Check the output folder first, then compute and write."""
     settings.validate()
     images.check_writable_dir(out_dir)
-    result = compute(scene, settings, progress, cancel)
+    result = compute(scene, settings, progress, cancel, cluster)
     result.seconds["export"] = export_seconds
-    write(result, out_dir, progress)
+    write(result, out_dir, progress, cancel)
     return result
 
 

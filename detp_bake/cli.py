@@ -2,11 +2,14 @@
 parser behind Blender's `blender -b SCENE.blend -c detp_bake bake ...`.
 
 Every check that can fail (settings, the .blend path, the output folder, object names, UV layers)
-runs before tracing starts; progress goes to stderr, the report path to stdout.
+runs before tracing starts. stdout lists the files written (or, with --json, a summary); progress,
+warnings and Blender's own messages go to stderr (output.py). Ctrl+C or SIGTERM cancels cleanly
+(interrupt.py): exit code 130, nothing written.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
@@ -14,7 +17,7 @@ from pathlib import Path
 from dataclasses import replace
 from typing import Optional, Sequence
 
-from . import __version__, bake as bake_mod, images
+from . import __version__, bake as bake_mod, images, interrupt, output
 from .errors import BakeCancelled, BakeError
 from .estimators import EstimatorSettings, names as estimator_names
 
@@ -75,6 +78,13 @@ def _bake_arguments(b, with_scene_path):
                    help="denoise the lightmaps with OIDN (default on; needs the pyoidn package)")
     b.add_argument("--keep-raw", action="store_true",
                    help="also write each lightmap before denoising, as <object>.<estimator>.raw.exr")
+    b.add_argument("--scheduler", default="", metavar="ADDRESS",
+                   help="trace the photons on a Dask cluster: its scheduler, e.g. tcp://10.0.0.5:8786 "
+                        "(needs the dask and distributed packages; README: Baking on a cluster)")
+    b.add_argument("--workers", type=int, default=0, metavar="N",
+                   help="trace the photons on N worker processes of this machine (a Dask LocalCluster)")
+    b.add_argument("--connect-timeout", type=float, default=10.0, metavar="SECONDS",
+                   help="give up on the scheduler (or its first worker) after this long (default 10)")
     b.add_argument("--apply", action="store_true", help="wire the lightmaps into the materials")
     b.add_argument("--frames", default=None, metavar="A-B[:STEP]",
                    help="bake every frame of this range: <object>.<estimator>.<frame:04d>.exr")
@@ -85,6 +95,7 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--force", action="store_true",
                    help="with --frames: bake again frames unchanged since the last bake into --out (kept by default)")
     b.add_argument("--save", default=None, metavar="OUT.blend", help="save the baked .blend here")
+    b.add_argument("--json", action="store_true", help="print a JSON summary on stdout instead of the file list")
 
 
 def settings_from_args(args) -> bake_mod.BakeSettings:
@@ -124,26 +135,42 @@ def _log(msg: str) -> None:
     print(f"detp_bake: {msg}", file=sys.stderr, flush=True)
 
 
-def _open_scene(args, settings, bl_scene):
+def _open_scene(args, settings, bl_scene, warn=output.log):
     """Check the inputs, open the .blend (unless Blender has one open) and export it."""
-    blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene)
+    blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene, warn)
     t0 = time.perf_counter()
     from .memory import geometry_budget
+    created = []
     scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
-                                 max_bytes=geometry_budget(settings.memory_budget_mb) or None)
+                                 created, max_bytes=geometry_budget(settings.memory_budget_mb) or None)
+    _warn_created(args, created, warn)
     _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
          f"baking {sum(o.bake for o in scene.objects)} objects")
     return blender, bl_scene, scene, out_dir, time.perf_counter() - t0
 
 
-def _check_and_open(args, settings, bl_scene):
+def _warn_created(args, created, warn) -> None:
+    if created and not args.save:
+        names = [name for name, _ in created]
+        warn(f"UV layer '{created[0][1]}' created on {', '.join(names[:5])}"
+             f"{f' and {len(names) - 5} more' if len(names) > 5 else ''} is not stored anywhere (no --save): "
+             "the lightmaps match it only in a scene saved with it (use --save, or add the layer in Blender)")
+
+
+def _check_and_open(args, settings, bl_scene, warn=output.log):
     """Check the inputs and open the .blend (unless Blender has one open)."""
     settings.validate()
     if args.apply and "exr" not in settings.formats:
         raise BakeError("--apply needs the exr format in --format")
+    if args.save and (Path(args.save).is_dir() or args.save.endswith(("/", "\\"))):
+        raise BakeError(f"--save '{args.save}' is a folder: give the .blend file to save, "
+                        f"e.g. --save {Path(args.save) / 'baked.blend'}")
     out_dir = images.check_writable_dir(args.out)
     if args.save:
         images.check_writable_dir(Path(args.save).resolve().parent)
+    elif args.apply:
+        warn("--apply without --save: the lightmaps are wired into the materials in memory only, and "
+             "nothing lasting happens (add --save OUT.blend)")
     try:
         from . import blender
     except ImportError as exc:
@@ -156,32 +183,47 @@ def _check_and_open(args, settings, bl_scene):
     return blender, bl_scene, out_dir
 
 
-def run_compare(args, bl_scene=None) -> int:
-    """The same photons through several estimators: their lightmaps, compare.png, compare.json."""
+def _check_cancel(cancel) -> None:
+    if cancel is not None and cancel():
+        raise BakeCancelled()
+
+
+def run_compare(args, bl_scene=None, cancel=None) -> dict:
+    """The same photons through several estimators: their lightmaps, compare.png, compare.json and
+    one report.json with a section per estimator, all written together."""
+    warn = output.Warnings()
     settings = settings_from_args(args)
     if args.frames is not None or args.moving or args.static or args.force:
         raise BakeError("--frames, --moving, --static and --force are for 'bake', not 'compare'")
     for name in args.estimators:
         replace(settings, estimator=name).validate()
-    blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
+    blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene, warn)
+    _check_cancel(cancel)
     from . import comparison
-    results = bake_mod.compute_many(scene, settings, args.estimators, StderrProgress())
+    results = bake_mod.compute_many(scene, settings, args.estimators, StderrProgress(), cancel,
+                                    cluster=getattr(args, "cluster", None))
     for result in results.values():
         result.seconds["export"] = export_seconds
-        bake_mod.write(result, out_dir)
+        output.warn_stale(out_dir, result, warn)
+    ours = list(warn)
+    for w in dict.fromkeys(w for r in results.values() for w in r.warnings):
+        warn(w)
+    for result in results.values():  # each section: the command line's warnings and its own
+        result.warnings = ours + result.warnings
     first = results[args.estimators[0]]
     seconds = {n: r.seconds["estimate"] for n, r in results.items()}
     picture, diffs = comparison.comparison_image({n: r.images for n, r in results.items()}, first.masks, seconds)
-    images.write_png(out_dir / "compare.png", picture)
     summary = {"estimators": args.estimators, "seconds": seconds, "difference_to_first": diffs,
-               "trace_seconds": first.seconds["trace"], "photons": first.stats.photons,
-               "files": {n: r.files for n, r in results.items()}}
-    (out_dir / "compare.json").write_text(json.dumps(summary, indent=2))
+               "trace_seconds": first.seconds["trace"], "photons": first.stats.photons}
+    extra = {"compare.png": lambda tmp: images.write_png(tmp, picture),
+             "compare.json": lambda tmp: tmp.write_text(json.dumps(
+                 {**summary, "files": {n: r.files for n, r in results.items()}}, indent=2))}
+    report = bake_mod.write_many(results, out_dir, StderrProgress(), cancel, extra=extra,
+                                 summary={"comparison": summary})
     for name in args.estimators:
         _log(f"{name}: estimate {seconds[name]:.2f} s, difference to {args.estimators[0]} {100 * diffs[name]:.1f} %")
-    print(out_dir / "compare.png")
-    print(out_dir / "compare.json")
-    return 0
+    return {"command": "compare", "files": {n: r.files for n, r in results.items()},
+            "extra": [str(out_dir / name) for name in extra], "report": str(report), "warnings": list(warn), **summary}
 
 
 def _log_noise(result) -> None:
@@ -193,29 +235,35 @@ def _log_noise(result) -> None:
              (f" (+{len(worst) - 8} more in report.json)" if len(worst) > 8 else ""))
 
 
-def run_bake(args, bl_scene=None) -> int:
-    """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene)."""
+def run_bake(args, bl_scene=None, cancel=None) -> dict:
+    """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene).
+    `cancel()` true stops it before anything is written. Returns the summary `main` prints."""
+    warn = output.Warnings()
     settings = settings_from_args(args)
     if args.frames is not None or args.moving or args.static or args.force:
-        return run_frames(args, settings, bl_scene)
-    blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
-    result = bake_mod.bake(scene, settings, out_dir, StderrProgress(), export_seconds=export_seconds)
+        return run_frames(args, settings, bl_scene, cancel, warn)
+    blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene, warn)
+    _check_cancel(cancel)
+    result = bake_mod.compute(scene, settings, StderrProgress(), cancel, cluster=getattr(args, "cluster", None))
+    result.seconds["export"] = export_seconds
     _log_noise(result)
+    output.warn_stale(out_dir, result, warn)
+    output.gather_warnings(result, warn)
+    report = bake_mod.write(result, out_dir, StderrProgress(), cancel)
+    # The files are in place: from here on a signal no longer undoes the bake.
+    saved = None
     if args.apply:
         blender.apply_all(bl_scene, result.files, args.uv_layer, settings.estimator)
     if args.save:
-        blender.save_blend(Path(args.save).resolve(), result.files)
-        print(f"detp_bake: saved {args.save}", file=sys.stderr)
-    for name, files in result.files.items():
-        for f in files:
-            print(f)
-    print(out_dir / "report.json")
-    if args.save:
-        print(Path(args.save).resolve())
-    return 0
+        saved = Path(args.save).resolve()
+        blender.save_blend(saved, result.files)
+        _log(f"saved {saved}")
+    return {"command": "bake", "files": result.files, "report": str(report), "saved": str(saved) if saved else None,
+            "estimator": settings.estimator, "photons": result.stats.photons, "stopped_by": result.stopped_by,
+            "noise": {n: round(100.0 * v, 3) for n, v in result.noise.items()}, "warnings": list(warn)}
 
 
-def run_frames(args, settings, bl_scene=None) -> int:
+def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> dict:
     """--frames: every frame of the range (frames.py); a cancel keeps the frames finished."""
     from . import frames
     if args.frames is None:
@@ -223,48 +271,72 @@ def run_frames(args, settings, bl_scene=None) -> int:
     frame_range = frames.parse_frames(args.frames)
     if args.apply and frame_range.step != 1:
         raise BakeError("--apply with --frames needs every frame (a step of 1): an image sequence has no gaps")
-    blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene)
+    if getattr(args, "cluster", None) is not None:
+        raise BakeError("--frames bakes here: --scheduler and --workers do not take frame ranges yet")
+    blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene, warn)
     from .memory import geometry_budget
-    scene_at = blender.frame_exporter(bl_scene, args.objects, args.uv_layer, settings.resolution, _log,
+    created = []
+    scene_at = blender.frame_exporter(bl_scene, args.objects, args.uv_layer, settings.resolution, _log, created,
                                       max_bytes=geometry_budget(settings.memory_budget_mb) or None)
     with blender.frame_kept(bl_scene):
-        result = frames.bake_frames(scene_at, frame_range, settings, out_dir, StderrProgress(),
+        result = frames.bake_frames(scene_at, frame_range, settings, out_dir, StderrProgress(), cancel,
                                     moving=args.moving, static=args.static, log=_log, force=args.force)
-    if args.apply and result.frames:
-        # The frames finished, from the first on (a cancel keeps a shorter sequence).
-        first = result.frames[0]
-        last = max(f for i, f in enumerate(result.frames) if f == first + i)
+    _warn_created(args, created, warn)
+    if not result.frames:
+        raise BakeCancelled()
+    # The finished frames are in place: from here on a signal no longer undoes them.
+    first = result.frames[0]
+    last = max(f for i, f in enumerate(result.frames) if f == first + i)  # a cancel keeps a shorter sequence
+    if args.apply:
         blender.apply_all(bl_scene, result.files[first], args.uv_layer, settings.estimator, frames=(first, last))
         _log(f"applied the lightmaps as image sequences, frames {first}-{last}")
+    saved = None
     if args.save:
-        blender.save_blend(Path(args.save).resolve(),
-                           {f"{name}@{frame}": paths for frame, files in result.files.items()
-                            for name, paths in files.items()})
-        _log(f"saved {args.save}")
-    for frame in result.frames:
-        for paths in result.files[frame].values():
-            for f in paths:
-                print(f)
-    if result.frames:
-        print(result.report_path)
+        saved = Path(args.save).resolve()
+        blender.save_blend(saved, {f"{name}@{frame}": paths for frame, files in result.files.items()
+                                   for name, paths in files.items()})
+        _log(f"saved {saved}")
     if result.cancelled:
-        _log(f"cancelled; kept {len(result.frames)} finished frames of {len(frame_range.frames())}")
-        return 130
-    return 0
+        _log(f"cancelled: kept the {len(result.frames)} finished frames of {len(frame_range.frames())}")
+    return {"command": "bake", "files": {f"{name}@{frame}": paths for frame in result.frames
+                                         for name, paths in result.files[frame].items()},
+            "report": str(result.report_path), "saved": str(saved) if saved else None,
+            "estimator": settings.estimator, "frames": result.frames, "kept": result.skipped,
+            "moving": result.motion.moving, "cancelled": result.cancelled, "warnings": list(warn)}
+
+
+def _cluster(args):
+    """The Dask cluster to trace on (--scheduler, --workers), connected once the settings are
+    checked and before the scene is opened; without either, a bake runs here and imports no Dask."""
+    if not (args.scheduler or args.workers):
+        return contextlib.nullcontext()
+    if args.scheduler and args.workers:
+        raise BakeError("--scheduler and --workers: choose one (a cluster of your own, or workers on this machine)")
+    if args.workers < 0:
+        raise BakeError(f"setting 'workers' = {args.workers}: must be 1 or more")
+    settings_from_args(args).validate()
+    from .distributed import Cluster
+    cluster = Cluster(args.scheduler, args.workers, timeout=args.connect_timeout)
+    cluster.connect()
+    info = cluster.describe()
+    _log(f"tracing on {info['workers']} Dask workers ({info['cores']} threads) at {info['address']}")
+    return cluster
 
 
 def main(argv: Optional[Sequence[str]] = None, bl_scene=None) -> int:
     parser = build_parser(with_scene_path=bl_scene is None)
     args = parser.parse_args(argv)
-    try:
-        if args.command == "bake":
-            return run_bake(args, bl_scene)
-        if args.command == "compare":
-            return run_compare(args, bl_scene)
-    except BakeError as exc:
-        print(f"detp_bake: error: {exc}", file=sys.stderr)
-        return 2
-    except BakeCancelled:
-        print("detp_bake: cancelled; nothing written", file=sys.stderr)
-        return 130
-    return 1
+    run = {"bake": run_bake, "compare": run_compare}[args.command]
+    with interrupt.cancel_on_signals() as cancel:
+        try:
+            with output.quiet_stdout():  # Blender's own prints go to stderr
+                with _cluster(args) as args.cluster:
+                    summary = run(args, bl_scene, cancel)
+        except BakeError as exc:
+            print(f"detp_bake: error: {exc}", file=sys.stderr)
+            return 2
+        except (BakeCancelled, KeyboardInterrupt):
+            print("detp_bake: cancelled: nothing written", file=sys.stderr, flush=True)
+            return interrupt.EXIT_CODE
+    output.written(summary, args.json)
+    return interrupt.EXIT_CODE if summary.get("cancelled") else 0

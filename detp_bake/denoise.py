@@ -103,8 +103,8 @@ def _check_guide(name: str, guide: Optional[np.ndarray], shape: tuple) -> Option
 
 def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.ndarray] = None,
                      normal: Optional[np.ndarray] = None, filter: Optional[str] = None,
-                     keep_energy: bool = True, margin: int = 16, quality: str = "high"
-                     ) -> np.ndarray:
+                     keep_energy: bool = True, margin: int = 16, quality: str = "high",
+                     weights: Optional[np.ndarray] = None) -> np.ndarray:
     """Denoise one lightmap and return a new (H, W, 3) float32 image in the same layout.
 
     image: (H, W, 3) irradiance E/π (HDR, ≥ 0), row 0 at the bottom as in texels.py; only the
@@ -119,6 +119,9 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     keep_energy: rescale each channel so the mean over covered texels equals the raw mean. OIDN
     moves that mean by up to ~0.6 % (measured at 40 % noise with guides; ~0.1 % at 10 %), while
     the raw mean is what the photons measured; one factor per channel leaves the shape as is.
+    weights: (H, W) surface area per texel, for that mean. A chart's border texels cover slivers of
+    surface, and OIDN evens them out with their neighbours: a plain mean over texels then counts a
+    small chart's (a leaf's) rim as much as its middle, and the rescale shifts its energy.
     margin: rings of `texels.dilate` that refill the gutter from the denoised texels afterwards
     (pass the bake's margin setting); texels further out are 0, as a bake leaves them.
     quality: OIDN's "high" (default), "balanced" or "fast".
@@ -132,6 +135,8 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
         raise BakeError(f"denoise: lightmap must be (H, W, 3), got {image.shape}")
     if mask.shape != image.shape[:2]:
         raise BakeError(f"denoise: mask has shape {mask.shape}, the lightmap {image.shape[:2]}")
+    if weights is not None and np.shape(weights) != mask.shape:
+        raise BakeError(f"denoise: weights have shape {np.shape(weights)}, the lightmap {image.shape[:2]}")
     albedo = _check_guide("albedo", albedo, image.shape)
     normal = _check_guide("normal", normal, image.shape)
     if filter is None:
@@ -170,8 +175,11 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
 
     den = np.maximum(result[mask], 0.0)
     if keep_energy:
-        raw_mean = covered.mean(axis=0, dtype=np.float64)
-        den_mean = den.mean(axis=0, dtype=np.float64)
+        w = None if weights is None else np.asarray(weights, np.float64)[mask]
+        if w is not None and not w.sum() > 0:
+            w = None
+        raw_mean = np.average(covered, axis=0, weights=w)
+        den_mean = np.average(den, axis=0, weights=w)
         scale = np.where(den_mean > 0, raw_mean / np.where(den_mean > 0, den_mean, 1.0), 1.0)
         den = (den * scale).astype(np.float32)
     out[mask] = den

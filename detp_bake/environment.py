@@ -15,8 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .footprint import sky_areas, sky_start
 from .lights import Emitter
-from .sampling import inline, jit, orthonormal_basis, photon_rng, search_cdf, uniform2, uniform_disc
+from .sampling import inline, jit, photon_rng, search_cdf, uniform2
 
 
 @dataclass
@@ -46,10 +47,21 @@ class EnvironmentMap:
 
     def flux(self, radius: float) -> np.ndarray:
         """Flux crossing a disc of radius `radius` from all directions: πR² ∫ L dω."""
+        return self.flux_through(lambda dirs: np.full(len(dirs), np.pi * radius ** 2))
+
+    def flux_through(self, area) -> np.ndarray:
+        """∫ L(ω) area(−ω) dω, pixel by pixel: the flux that crosses, from every direction, a start
+        area of `area(travel directions (N, 3))` square metres facing it."""
         h, w = self.radiance.shape[:2]
         theta = (np.arange(h)[::-1] + 0.5) / h * np.pi
+        phi = (0.5 - (np.arange(w) + 0.5) / w) * 2.0 * np.pi
+        image = np.stack(np.broadcast_arrays(np.sin(theta)[:, None] * np.cos(phi)[None, :],
+                                             np.sin(theta)[:, None] * np.sin(phi)[None, :],
+                                             np.cos(theta)[:, None]), axis=-1).reshape(-1, 3)
+        world = image @ np.asarray(self.rotation, np.float64)  # rotᵀ · image direction, row by row
+        a = np.asarray(area(np.ascontiguousarray(-world)), np.float64).reshape(h, w)
         d_omega = (2 * np.pi / w) * (np.pi / h) * np.sin(theta)
-        return np.pi * radius ** 2 * np.einsum("hwc,h->c", np.asarray(self.radiance, np.float64), d_omega)
+        return np.einsum("hwc,hw,h->c", np.asarray(self.radiance, np.float64), a, d_omega)
 
 
 @inline
@@ -77,35 +89,36 @@ def sample_direction(marginal, cond, prob, rot, u0, u1):
 
 
 @jit
-def _emit_environment(key, first, n, marginal, cond, prob, rot, pixels, centre, radius, scale, o, d, f, rng):
-    """Photons from the map: arriving from ω (travelling −ω), starting on a disc of the scene's
-    bounding radius facing ω, 2 radii out. Each carries L(ω)·πR² / (p(ω)·count) (`scale` = πR²/count)."""
+def _emit_environment(key, first, n, marginal, cond, prob, rot, pixels, lo, hi, centre, radius, scale, o, d, f, rng):
+    """Photons from the map: arriving from ω (travelling −ω), starting on the geometry's box seen
+    along ω (footprint.sky_start). Each carries L(ω)·area / (p(ω)·count) (`scale` = 1/count)."""
     for i in range(n):
         r = photon_rng(key, first + i)
         r, u0, u1 = uniform2(r)
         r, u2, u3 = uniform2(r)
         x, y, z, pdf, k = sample_direction(marginal, cond, prob, rot, u0, u1)
         dx, dy, dz = -x, -y, -z
-        px, py = uniform_disc(u2, u3)
-        t, s = orthonormal_basis(dx, dy, dz)
-        for c in range(3):
-            o[i, c] = centre[c] + radius * (px * t[c] + py * s[c]) - 2.0 * radius * (dx, dy, dz)[c]
+        ox, oy, oz, area = sky_start(dx, dy, dz, lo, hi, centre, radius, u2, u3)
+        o[i, 0], o[i, 1], o[i, 2] = ox, oy, oz
         d[i, 0], d[i, 1], d[i, 2] = dx, dy, dz
-        w = scale / pdf
+        w = scale * area / pdf
         f[i, 0], f[i, 1], f[i, 2] = pixels[k, 0] * w, pixels[k, 1] * w, pixels[k, 2] * w
         if rng.shape[0] > 0:
             rng[i] = r
 
 
-def environment_emitter(env: EnvironmentMap, centre: np.ndarray, radius: float) -> Emitter:
+def environment_emitter(env: EnvironmentMap, centre: np.ndarray, radius: float, lo=None, hi=None) -> Emitter:
+    """The map's photons (see _emit_environment); its flux ∫ L(ω)·area(ω) dω summed pixel by pixel."""
     pixels, marginal, cond, prob = env.tables()
     rot = np.ascontiguousarray(env.rotation, np.float64)
     centre = np.asarray(centre, np.float64)
-    flux = env.flux(radius)
+    lo = centre - radius if lo is None else np.asarray(lo, np.float64)
+    hi = centre + radius if hi is None else np.asarray(hi, np.float64)
+    flux = env.flux_through(lambda dirs: sky_areas(dirs, lo, hi, centre, float(radius)))
 
     def emit(key, first, n, total, o, d, f, rng):
-        _emit_environment(key, first, n, marginal, cond, prob, rot, pixels, centre, float(radius),
-                          np.pi * radius ** 2 / total, o, d, f, rng)
+        _emit_environment(key, first, n, marginal, cond, prob, rot, pixels, lo, hi, centre, float(radius),
+                          1.0 / total, o, d, f, rng)
 
     return Emitter("world", flux, emit)
 

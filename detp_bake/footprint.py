@@ -7,6 +7,10 @@ instead on the cells of a grid across the sun's direction that some triangle's p
 caller asks for: DETP discs reach past a surface's edge by their radius). Every covered
 cell has the same area, so the photons stay uniform per unit area and each carries E × the covered
 area over the photon count: the irradiance is unchanged, and most photons hit something.
+
+Sky photons (a world colour or an HDRI) each have a direction of their own, so a grid per direction
+would not pay: each starts instead on the geometry's bounding box as seen along its direction,
+and carries L·area/p(ω), the area being that view's (never more than the bounding disc's).
 """
 from __future__ import annotations
 
@@ -16,7 +20,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .sampling import cone_lobe, in_frame, jit, photon_rng, uniform2
+from .sampling import (cone_lobe, in_frame, inline, jit, orthonormal_basis, photon_rng, uniform2, uniform_disc,
+                       uniform_sphere)
 
 GRID = 256  # cells along each side of the footprint's bounding rectangle
 
@@ -97,5 +102,73 @@ def emit_sun(key, first, n, frame, cos_max, origin, cell, cells, flux, o, d, f, 
             o[i, k] = origin[k] + cu * t[k] + cv * s[k]
         d[i, 0], d[i, 1], d[i, 2] = dx, dy, dz
         f[i, 0], f[i, 1], f[i, 2] = flux[0], flux[1], flux[2]
+        if rng.shape[0] > 0:
+            rng[i] = r
+
+
+@inline
+def sky_start(dx, dy, dz, lo, hi, centre, radius, u, v):
+    """Start of a photon travelling (dx, dy, dz), from two uniforms: uniform over the box [lo, hi]
+    as seen along the direction (a point of one of the faces it enters through, chosen by their
+    projected areas, which tile that view without overlap), moved 2 radii back, out of the
+    scene. Returns the start and the projected area."""
+    lx, ly, lz = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
+    ax, ay, az = abs(dx) * ly * lz, abs(dy) * lx * lz, abs(dz) * lx * ly
+    area = ax + ay + az
+    if not area > 0.0:  # a point: the bounding sphere's disc
+        t, s = orthonormal_basis(dx, dy, dz)
+        px, py = uniform_disc(u, v)
+        pa, pb = radius * px, radius * py
+        return (centre[0] + pa * t[0] + pb * s[0] - 2.0 * radius * dx,
+                centre[1] + pa * t[1] + pb * s[1] - 2.0 * radius * dy,
+                centre[2] + pa * t[2] + pb * s[2] - 2.0 * radius * dz, math.pi * radius * radius)
+    pick = u * area
+    if pick < ax:
+        f = pick / ax
+        px = lo[0] if dx > 0.0 else hi[0]
+        py, pz = lo[1] + f * ly, lo[2] + v * lz
+    elif pick < ax + ay:
+        f = min((pick - ax) / ay, 1.0)
+        py = lo[1] if dy > 0.0 else hi[1]
+        px, pz = lo[0] + f * lx, lo[2] + v * lz
+    else:
+        f = min((pick - ax - ay) / max(az, 1e-300), 1.0)
+        pz = lo[2] if dz > 0.0 else hi[2]
+        px, py = lo[0] + f * lx, lo[1] + v * ly
+    return px - 2.0 * radius * dx, py - 2.0 * radius * dy, pz - 2.0 * radius * dz, area
+
+
+@jit
+def sky_areas(dirs, lo, hi, centre, radius):
+    """The start area `sky_start` uses for each direction of travel in `dirs` (N, 3)."""
+    out = np.empty(dirs.shape[0])
+    for i in range(dirs.shape[0]):
+        out[i] = sky_start(dirs[i, 0], dirs[i, 1], dirs[i, 2], lo, hi, centre, radius, 0.5, 0.5)[3]
+    return out
+
+
+def mean_sky_area(lo, hi, centre, radius, n: int = 16384) -> float:
+    """The start area averaged over all directions (a Fibonacci sphere of n points)."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    phi = math.pi * (3.0 - math.sqrt(5.0)) * k
+    rho = np.sqrt(1.0 - z * z)
+    dirs = np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
+    return float(sky_areas(dirs, lo, hi, centre, radius).mean())
+
+
+@jit
+def emit_sky(key, first, n, lo, hi, centre, radius, scale, o, d, f, rng):
+    """Uniform sky radiance: directions uniform over the sphere, each photon L·area·4π/count
+    (`scale` = L·4π/count, per channel)."""
+    for i in range(n):
+        r = photon_rng(key, first + i)
+        r, u0, u1 = uniform2(r)
+        r, u2, u3 = uniform2(r)
+        dx, dy, dz = uniform_sphere(u2, u3)
+        ox, oy, oz, area = sky_start(dx, dy, dz, lo, hi, centre, radius, u0, u1)
+        o[i, 0], o[i, 1], o[i, 2] = ox, oy, oz
+        d[i, 0], d[i, 1], d[i, 2] = dx, dy, dz
+        f[i, 0], f[i, 1], f[i, 2] = scale[0] * area, scale[1] * area, scale[2] * area
         if rng.shape[0] > 0:
             rng[i] = r

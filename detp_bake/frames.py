@@ -259,7 +259,7 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
             if scene is None:
                 scene = scene_at(frame)
                 export_seconds[frame] += time.perf_counter() - t0
-            baked = bake_mod.compute(scene, settings, framed, cancel, state)
+            baked = bake_mod.compute(scene, settings, framed, cancel, frame_state=state)
             baked.seconds["export"] = export_seconds[frame]
             baked.export = dict(getattr(scene, "export_stats", None) or {})
             bake_mod.write(baked, out, framed, cancel, frame=frame)

@@ -48,9 +48,11 @@ def _write(oiio, path, spec, data) -> None:
         raise BakeError(f"cannot write image '{path}': {oiio.geterror()}")
     try:
         if not out.write_image(data):
-            raise BakeError(f"cannot write image '{path}': {out.geterror()}")
+            raise BakeError(f"cannot write image '{path}': {out.geterror() or 'write failed (disk full?)'}")
     finally:
-        out.close()
+        closed = out.close()  # EXR data reaches the disk here: a full disk shows up now
+    if not closed:
+        raise BakeError(f"cannot write image '{path}': {out.geterror() or 'write failed (disk full?)'}")
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:

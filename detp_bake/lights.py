@@ -362,21 +362,27 @@ def mesh_emitter(scene: Scene, offset: float) -> Emitter | None:
     return Emitter("emissive meshes", flux, emit)
 
 
-def world_emitter(radiance: np.ndarray, centre: np.ndarray, radius: float) -> Emitter:
-    """Uniform sky radiance L: a flux of L·πR²·4π crosses the bounding sphere inwards."""
+def world_emitter(radiance: np.ndarray, centre: np.ndarray, radius: float, lo=None, hi=None) -> Emitter:
+    """Uniform sky radiance L. Photons start on the geometry's box [lo, hi] seen along their
+    direction (footprint.sky_start): the flux L·4π·⟨area⟩ crosses it, the sky's share that can
+    reach the scene. Without a box, the bounding sphere's disc (L·πR²·4π)."""
+    from .footprint import emit_sky, mean_sky_area
+
     radiance = np.asarray(radiance, np.float64)
-    flux = radiance * 4.0 * np.pi ** 2 * radius ** 2
     centre = np.asarray(centre, np.float64)
-    frame = _frame(np.array([0.0, 0.0, 1.0]))
+    lo = centre - radius if lo is None else np.asarray(lo, np.float64)
+    hi = centre + radius if hi is None else np.asarray(hi, np.float64)
+    flux = radiance * 4.0 * np.pi * mean_sky_area(lo, hi, centre, float(radius))
 
     def emit(key, first, n, total, o, d, f, rng):
-        _emit_parallel(key, first, n, frame, -2.0, centre, float(radius), flux / total, o, d, f, rng)
+        emit_sky(key, first, n, lo, hi, centre, float(radius), radiance * 4.0 * np.pi / total, o, d, f, rng)
 
     return Emitter("world", flux, emit)
 
 
 def build_emitters(scene: Scene, margin: float = 0.0) -> list[Emitter]:
-    """Every emitter of the scene; `margin` widens the sun's footprint (lights.sun_emitter)."""
+    """Every emitter of the scene; `margin` widens the sun's footprint (lights.sun_emitter) and the
+    sky's box (footprint.sky_start)."""
     centre, radius = scene.bounds()
     out: list[Emitter] = []
     for light in scene.lights:
@@ -393,11 +399,16 @@ def build_emitters(scene: Scene, margin: float = 0.0) -> list[Emitter]:
     mesh = mesh_emitter(scene, 1e-5 * radius)
     if mesh is not None:
         out.append(mesh)
+    # Sky photons start on the geometry's box, widened as the sun's footprint is: DETP discs reach
+    # past a surface's edge.
+    lo, hi = (scene.positions.reshape(-1, 3).min(axis=0).astype(np.float64) - margin,
+              scene.positions.reshape(-1, 3).max(axis=0).astype(np.float64) + margin) \
+        if len(scene.positions) else (None, None)
     if scene.world_map is not None:
         from .environment import environment_emitter
-        out.append(environment_emitter(scene.world_map, centre, radius))
+        out.append(environment_emitter(scene.world_map, centre, radius, lo, hi))
     elif np.mean(scene.world) > 0.0:
-        out.append(world_emitter(scene.world, centre, radius))
+        out.append(world_emitter(scene.world, centre, radius, lo, hi))
     # A negative light (Cycles subtracts it) keeps its sign: its photons carry negative flux, which
     # every estimator and the Russian roulette (by albedo, not flux) treat linearly.
     out = [e for e in out if np.any(np.asarray(e.flux) != 0.0)]

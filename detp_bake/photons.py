@@ -70,6 +70,11 @@ class TraceStats:
     alpha_passes: int = 0  # flights continued through a cut-out surface
     alpha_cut: int = 0  # flights stopped because they passed MAX_PASSES cut-outs
 
+    def add(self, other: "TraceStats") -> None:
+        """Add another run's counts and flux (bake.Totals: runs of batches, added in batch order)."""
+        for name, value in vars(other).items():
+            setattr(self, name, getattr(self, name) + value)
+
 
 class RayCaster:
     """An Embree scene of all triangles, its BVH built at construction. One `intersect` call is
@@ -363,13 +368,15 @@ class PhotonTracer:
             a += size
         return out
 
-    def batches(self, cancel: Optional[Callable[[], bool]] = None) -> Iterator[PhotonBatch]:
+    def batches(self, cancel: Optional[Callable[[], bool]] = None,
+                indices: Optional[range] = None) -> Iterator[PhotonBatch]:
+        """The batches in order, or batches `indices` (a range of batch numbers) only."""
         if self._caster is None:
             self._caster = self._shared_caster or RayCaster(self.scene.positions)
         if self.threads > 1:
             self._pool = ThreadPoolExecutor(self.threads)
         try:
-            for index in range(self.batch_count):
+            for index in range(self.batch_count) if indices is None else indices:
                 if cancel is not None and cancel():
                     raise BakeCancelled()
                 t0 = time.perf_counter()

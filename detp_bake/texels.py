@@ -10,7 +10,7 @@ bottom row, as in Blender's `Image.pixels`. Files are written top row first (see
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
@@ -31,6 +31,11 @@ class Lightmap:
     offset: int
     count: int
     texel_size: float  # world metres per texel (area-weighted over the object)
+    # UV layouts that give silently wrong lightmaps (the bake warns): the share of covered texels
+    # whose centre lies on two or more UV triangles (overlapping faces, Array copies sharing UVs),
+    # and the share of the UV area outside 0..1 (not baked at all).
+    overlap: float = 0.0
+    outside: float = 0.0
 
     @property
     def texels(self) -> slice:
@@ -133,11 +138,15 @@ def _clip_area(xs, ys, n, x0, y0, x1, y1):
 
 
 @numba.njit(cache=True)
-def _rasterise(uv, world_area, width, height, best_tri, best_d2, bary, cover):
-    """For each texel, the UV triangle nearest its centre within half a texel diagonal, and the
-    world area of surface inside the texel's square (`cover`), summed over triangles."""
+def _rasterise(uv, world_area, width, height, best_tri, best_d2, bary, cover, inside):
+    """For each texel, the UV triangle nearest its centre within half a texel diagonal, the
+    world area of surface inside the texel's square (`cover`), summed over triangles, and how many
+    triangles hold its centre strictly inside (`inside`: 2 or more is an overlap). Returns the UV
+    area (in texels²) of all triangles, and of their parts inside 0..1."""
     xs = np.empty(12)
     ys = np.empty(12)
+    total = 0.0
+    within = 0.0
     for t in range(uv.shape[0]):
         ax, ay = uv[t, 0, 0] * width, uv[t, 0, 1] * height
         bx, by = uv[t, 1, 0] * width, uv[t, 1, 1] * height
@@ -145,6 +154,11 @@ def _rasterise(uv, world_area, width, height, best_tri, best_d2, bary, cover):
         uv_area = 0.5 * abs((bx - ax) * (cy - ay) - (by - ay) * (cx - ax))
         if uv_area <= 1e-12:
             continue
+        total += uv_area
+        xs[0], xs[1], xs[2] = ax, bx, cx
+        ys[0], ys[1], ys[2] = ay, by, cy
+        within += _clip_area(xs, ys, 3, 0.0, 0.0, float(width), float(height))
+        twice = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)  # signed: either winding
         scale = world_area[t] / uv_area
         i0 = max(0, int(np.floor(min(ax, min(bx, cx)) - 1.5)))
         i1 = min(width - 1, int(np.ceil(max(ax, max(bx, cx)) + 0.5)))
@@ -164,10 +178,17 @@ def _rasterise(uv, world_area, width, height, best_tri, best_d2, bary, cover):
                 xs[0], xs[1], xs[2] = ax, bx, cx
                 ys[0], ys[1], ys[2] = ay, by, cy
                 cover[k] += scale * _clip_area(xs, ys, 3, px - 0.5, py - 0.5, px + 0.5, py + 0.5)
+                if d2 < 1e-12:
+                    # Strictly inside (a centre on a shared edge belongs to neither side).
+                    ea = ((bx - px) * (cy - py) - (by - py) * (cx - px)) / twice
+                    eb = ((cx - px) * (ay - py) - (cy - py) * (ax - px)) / twice
+                    if ea > 1e-9 and eb > 1e-9 and 1.0 - ea - eb > 1e-9:
+                        inside[k] += 1
                 if d2 < best_d2[k] - 1e-12:
                     best_d2[k] = d2
                     best_tri[k] = t
                     bary[k, 0], bary[k, 1], bary[k, 2] = w0, w1, w2
+    return total, within
 
 
 def rasterise(scene: Scene) -> TexelSet:
@@ -191,7 +212,9 @@ def rasterise(scene: Scene) -> TexelSet:
         best_d2 = np.full(res * res, np.inf)
         bary = np.zeros((res * res, 3))
         cover = np.zeros(res * res)
-        _rasterise(np.ascontiguousarray(uv[sl]), world_area[sl], res, res, best_tri, best_d2, bary, cover)
+        inside = np.zeros(res * res, np.int32)
+        total, within = _rasterise(np.ascontiguousarray(uv[sl]), world_area[sl], res, res, best_tri, best_d2,
+                                   bary, cover, inside)
         pixel = np.flatnonzero(best_tri >= 0)
         if pixel.size == 0:
             raise BakeError(f"object '{obj.name}': its lightmap UVs cover no texel at {res}x{res} "
@@ -209,7 +232,10 @@ def rasterise(scene: Scene) -> TexelSet:
         nrm /= np.maximum(np.linalg.norm(nrm, axis=1), 1e-30)[:, None]
         obj_uv = uv_area[sl].sum() * res * res
         texel_size = float(np.sqrt(world_area[sl].sum() / obj_uv)) if obj_uv > 0 else 0.0
-        lightmaps.append(Lightmap(obj.name, index, res, res, offset, len(pixel), texel_size))
+        held = int(np.count_nonzero(inside))
+        overlap = float(np.count_nonzero(inside > 1)) / held if held else 0.0
+        outside = max(0.0, 1.0 - within / total) if total > 0 else 0.0
+        lightmaps.append(Lightmap(obj.name, index, res, res, offset, len(pixel), texel_size, overlap, outside))
         parts.append((pos, nrm, tri.astype(np.int32), pixel.astype(np.int64), cover[pixel],
                       best_d2[pixel] <= 1e-9))
         offset += len(pixel)
@@ -226,7 +252,7 @@ def select(texels: TexelSet, mask: np.ndarray) -> TexelSet:
     lightmaps, offset = [], 0
     for lm in texels.lightmaps:
         count = int(mask[lm.texels].sum())
-        lightmaps.append(Lightmap(lm.name, lm.object_index, lm.width, lm.height, offset, count, lm.texel_size))
+        lightmaps.append(replace(lm, offset=offset, count=count))
         offset += count
     return TexelSet(texels.position[mask], texels.normal[mask], texels.triangle[mask], texels.pixel[mask],
                     texels.area[mask], texels.centre_inside[mask], lightmaps)

@@ -25,6 +25,7 @@ class BakeJob:
         self.out_dir = common.output_directory(context)
         self.objects = [o.name for o in common.bake_targets(context)]
         self.cancel = threading.Event()
+        self.cluster = common.cluster(context)  # connected in `run`, off the main thread
         self.progress = bake.Progress("export", 0.0, "Exporting scene")
         self.created_uv = []
         self.messages = []
@@ -59,7 +60,8 @@ class BakeJob:
 
     def run(self) -> None:
         try:
-            result = bake.compute(self.scene, self.settings, self._on_progress, self.cancel)
+            with self.cluster as cluster:
+                result = bake.compute(self.scene, self.settings, self._on_progress, self.cancel, cluster)
             result.seconds["export"] = self.export_seconds
             bake.write(result, self.out_dir, self._on_progress, self.cancel)
             self.result = result

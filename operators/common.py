@@ -12,6 +12,17 @@ def preferences(context):
     return addon.preferences if addon is not None else None
 
 
+def cluster(context):
+    """The Dask cluster of the preferences (distributed.py), not yet connected, or a null context."""
+    import contextlib
+    prefs = preferences(context)
+    address = prefs.scheduler_address.strip() if prefs is not None else ""
+    if not address:
+        return contextlib.nullcontext()
+    from ..detp_bake.distributed import Cluster
+    return Cluster(address)
+
+
 def bake_settings(context, estimator=None) -> BakeSettings:
     s = context.scene.detp_bake
     prefs = preferences(context)

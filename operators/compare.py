@@ -47,8 +47,8 @@ def run_compare(context, names, report, progress=None, cancel=None) -> dict:
     try:
         scene = common.export(context, objects, lambda m: report({"INFO"}, m), created)
         results = bake.compute_many(scene, settings, names, progress, cancel)
-        for result in results.values():
-            bake.write(result, out_dir, progress, cancel)
+        # One report.json with a section per estimator, the lightmaps of all, written together.
+        bake.write_many(results, out_dir, progress, cancel, summary={"comparison": {"estimators": names}})
     except BaseException:
         blender.remove_uv_layers(context.scene, created)
         raise

@@ -23,7 +23,7 @@ MANIFEST = ROOT / "blender_manifest.toml"
 LINES = {"4.5": "3.11", "5.2": "3.13"}
 
 # What the extension imports at run time besides Blender's own numpy (bpy is Blender itself).
-RUNTIME = ("embreex", "OpenImageIO", "numba", "llvmlite", "scipy", "xatlas")
+RUNTIME = ("embreex", "OpenImageIO", "numba", "llvmlite", "scipy", "xatlas", "pyoidn")
 
 # Blender platform -> pip --platform tags, most preferred first.
 # - linux-x64: Blender 4.5+ needs glibc 2.28, so manylinux_2_28 and older.
@@ -57,9 +57,11 @@ def wheel_platform(filename: str) -> str:
     raise ValueError(f"unexpected platform tag in wheel {filename!r}")
 
 
-def wheel_python(filename: str) -> str:
-    """'3.11' for a cp311 wheel."""
+def wheel_python(filename: str) -> str | None:
+    """'3.11' for a cp311 wheel; None for a py3 wheel (pyoidn: one wheel serves every line)."""
     tag = Path(filename).stem.split("-")[-3]
+    if tag == "py3":
+        return None
     m = re.fullmatch(r"cp3(\d+)", tag)
     if not m:
         raise ValueError(f"unexpected Python tag in wheel {filename!r}")
@@ -74,7 +76,7 @@ def wheel_name_version(filename: str) -> tuple[str, str]:
 def manifest_wheels(python: str | None = None, platform: str | None = None) -> list[str]:
     """The manifest's wheel paths ('./wheels/x.whl'), optionally for one Python and one platform."""
     return [w for w in manifest().get("wheels", [])
-            if (python is None or wheel_python(w) == python)
+            if (python is None or wheel_python(w) in (python, None))
             and (platform is None or wheel_platform(w) == platform)]
 
 

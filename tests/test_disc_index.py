@@ -13,9 +13,11 @@ from test_detp_exact import random_case, run, split
 
 def _real_case(radius_texels, resolution=20, photons=200_000):
     """A plate and a ball with rasterised charts, photons traced with indirect_only (the segments
-    after the first bounce, as a sampled-direct bake feeds them), discs cut by tangent clearance."""
+    after the first bounce, as a sampled-direct bake feeds them), discs cut by tangent clearance,
+    slabs cut to their own surface's rise (flat on the plate, curved on the ball)."""
     from detp_bake import texels as texels_mod
     from detp_bake.estimators.discs import SLAB, disc_radius
+    from detp_bake.estimators.rise import own_surface_rise
     from detp_bake.photons import PhotonTracer
     from detp_bake.scene import PointLight
     from synthetic import grid, make_scene, uv_sphere
@@ -31,7 +33,8 @@ def _real_case(radius_texels, resolution=20, photons=200_000):
     settings = EstimatorSettings(radius_texels=radius_texels)
     radius = disc_radius(texels, settings)
     clearance = texels_mod.tangent_clearance(texels, sc.positions, radius, 0.5 * SLAB * radius)
-    context = Context(scene_radius=tracer.escape_radius, expected_segments=10_000, clearance=clearance)
+    rise = own_surface_rise(texels, sc, radius)
+    context = Context(scene_radius=tracer.escape_radius, expected_segments=10_000, clearance=clearance, rise=rise)
     return texels, batches, settings, context
 
 
@@ -207,7 +210,8 @@ def _lattice_case(seed, n_segments=6000, noise=0.0):
 def test_lattice_patches_find_the_oracles_crossings(seed, radius_texels, kernel, noise, monkeypatch):
     """With noise, the patches' lattice tolerance is widened to take the noisy lattices in: then
     the margins, not rounding alone, decide which discs near a rim get the exact test (without
-    them, this test fails). One texel in ten has its disc cut short, as tangent clearance does."""
+    them, this test fails). One texel in ten has its disc cut short, as tangent clearance does, and
+    one in five a slab of its own (a surface that rises in front of it)."""
     from detp_bake.estimators import patches
 
     if noise:
@@ -216,8 +220,9 @@ def test_lattice_patches_find_the_oracles_crossings(seed, radius_texels, kernel,
     rng = np.random.default_rng(seed)
     clearance = np.where(rng.random(len(texels)) < 0.1, rng.uniform(0.3, 0.9, len(texels)) * radius_texels * 0.05,
                          np.inf)
+    rise = np.where(rng.random(len(texels)) < 0.2, rng.uniform(0.0, 0.3, len(texels)) * radius_texels * 0.05, 0.0)
     settings = EstimatorSettings(radius_texels=radius_texels, kernel=kernel)
-    context = Context(scene_radius=3.0, expected_segments=10_000, clearance=clearance)
+    context = Context(scene_radius=3.0, expected_segments=10_000, clearance=clearance, rise=rise)
     ref = _estimate("detp", texels, [batch], settings, context)
     got = _estimate("disc_index", texels, split(batch, 3), settings, context)
     assert got.counters["patches"] >= 3 and got.counters["patch_visits"] > 1000

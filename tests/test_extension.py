@@ -59,7 +59,7 @@ def test_manifest_wheels_are_the_pinned_runtime_wheels_for_every_line_and_platfo
             listed = sorted(eb.wheel_name_version(w) for w in eb.manifest_wheels(python, plat))
             assert listed == pinned, f"Blender {line} (Python {python}) on {plat}"
     assert {eb.wheel_platform(w) for w in manifest["wheels"]} == set(manifest["platforms"])
-    assert {eb.wheel_python(w) for w in manifest["wheels"]} == set(eb.LINES.values())
+    assert {eb.wheel_python(w) for w in manifest["wheels"]} - {None} == set(eb.LINES.values())
 
 
 @pytest.fixture(scope="module")
@@ -124,10 +124,12 @@ def test_install_bake_disable_uninstall(bpy, built_zip, tmp_path):
 
     assert r["bake"] == ["FINISHED"], log
     assert r["exr"] and all(n.endswith(".exr") and (out / n).stat().st_size > 0 for n in r["exr"]), r["exr"]
-    assert {"embreex", "numba", "llvmlite", "OpenImageIO"} <= set(r["imported_by_bake"])
+    assert {"embreex", "numba", "llvmlite", "OpenImageIO", "pyoidn"} <= set(r["imported_by_bake"])
     for name, path in r["module_files"].items():  # from the bundled wheels, nowhere else
         assert any(path.startswith(sp) for sp in r["wheel_site_packages"]), (name, path)
-    assert Path(r["numba_cache_dir"]) == Path(r["numba_user_path"]), "numba's cache must be the extension's user folder"
+    # numba's cache: the extension's user folder, one subfolder per state of the core's sources.
+    assert Path(r["numba_cache_dir"]).parent == Path(r["numba_user_path"]), r["numba_cache_dir"]
+    assert len(Path(r["numba_cache_dir"]).name) == 12
     assert r["numba_cache_files"] > 0
 
     assert r["disable"] == ["FINISHED"]

@@ -4,6 +4,8 @@ import os
 import bpy
 from bpy.props import IntProperty, StringProperty
 
+CONNECT_TIMEOUT = 5.0  # seconds: the button waits this long at most
+
 
 def _remember_cache_directory(self, context):
     """Numba reads its cache folder before the preferences exist: keep the choice in a file."""
@@ -27,15 +29,44 @@ class DETPBakePreferences(bpy.types.AddonPreferences):
                                     description="Folder for compiled kernels (empty: the extension's user folder). "
                                                 "Takes effect at the next start of Blender",
                                     update=_remember_cache_directory)
+    scheduler_address: StringProperty(name="Dask Scheduler", default="",
+                                      description="Trace the photons on this Dask cluster, e.g. tcp://10.0.0.5:8786 "
+                                                  "(needs the dask and distributed packages; empty: on this machine)")
 
     def draw(self, context):
         layout = self.layout
         layout.prop(self, "threads")
         layout.prop(self, "memory_budget")
         layout.prop(self, "cache_directory")
+        row = layout.row()
+        row.prop(self, "scheduler_address")
+        row.operator(DETPBAKE_OT_test_cluster.bl_idname, text="Test Connection")
 
 
-classes = (DETPBakePreferences,)
+class DETPBAKE_OT_test_cluster(bpy.types.Operator):
+    """Connect to the Dask scheduler of the preferences and report its workers and their cores"""
+    bl_idname = "detp_bake.test_cluster"
+    bl_label = "Test Connection"
+
+    def execute(self, context):
+        from ..detp_bake.distributed import Cluster
+        from ..detp_bake.errors import BakeError
+        address = context.preferences.addons[DETPBakePreferences.bl_idname].preferences.scheduler_address.strip()
+        if not address:
+            self.report({"ERROR"}, "set the Dask scheduler address first")
+            return {"CANCELLED"}
+        try:
+            with Cluster(address, timeout=CONNECT_TIMEOUT) as cluster:
+                info = cluster.describe()
+        except BakeError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"{address}: {info['workers']} workers, {info['cores']} cores, "
+                              f"memory limit {info['memory_limit'] / 1e9:.1f} GB per worker")
+        return {"FINISHED"}
+
+
+classes = (DETPBakePreferences, DETPBAKE_OT_test_cluster)
 
 
 register, unregister = bpy.utils.register_classes_factory(classes)

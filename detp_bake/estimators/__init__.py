@@ -4,6 +4,11 @@ Every estimator has one shape: built from the texels and the settings, it is fed
 they are traced (`add`), then `finish` returns the irradiance E (W/m², RGB) at every texel and a
 dict of counters for report.json. Streaming estimators do their work in `add`, so memory stays
 bounded whatever the photon count; others keep what they need until `finish`.
+
+A bake may also be estimated in runs of batches, here or on a cluster's workers (bake.trace_batches):
+`take` hands over what `add` gathered since the last take, summed from zero, and `absorb` adds such
+sums (a bake's total, added up in batch order by bake.Totals) back in before `finish`. Float sums
+depend on the order they are added in; this way they depend on the batch numbers alone.
 """
 from __future__ import annotations
 
@@ -43,6 +48,7 @@ class Context:
     scene_radius: float = 1.0
     expected_segments: int = 0  # an estimate made before tracing, for work limits
     clearance: Optional[np.ndarray] = None  # per texel, free distance in its tangent plane (DETP discs)
+    rise: Optional[np.ndarray] = None  # per texel, its own surface's height in front of its disc (rise.py)
     frames: Optional["FrameState"] = None  # set when baking a frame range (frames.py)
 
 
@@ -85,6 +91,16 @@ class Estimator:
         raise NotImplementedError
 
     def finish(self) -> Estimate:
+        raise NotImplementedError
+
+    def take(self) -> dict:
+        """What `add` gathered since the last take, and start again from zero: {key: value} where
+        values add with += (arrays, numbers, lists). Streaming estimators put their per-texel
+        sums, in texel order, under 'irradiance'."""
+        raise NotImplementedError
+
+    def absorb(self, sums: dict) -> None:
+        """Add sums made by `take` (of this estimator or of one built alike on another machine)."""
         raise NotImplementedError
 
 

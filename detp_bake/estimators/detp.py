@@ -52,7 +52,7 @@ class BruteForceDETP(Estimator):
         if work > WORK_LIMIT:
             raise BakeError(f"estimator 'detp' (brute force) would test about {work:.2g} segment–disc pairs "
                             f"(limit {WORK_LIMIT:.0e}): use sphere_cache or disc_index, or fewer photons/texels")
-        self.discs = make_discs(texels, settings, self.context.scene_radius, self.context.clearance)
+        self.discs = make_discs(texels, settings, self.context.scene_radius, self.context.clearance, self.context.rise)
         self.acc = np.zeros((len(texels), 3))
         self.crossings = np.zeros(len(texels), np.int64)
         self.segments = 0
@@ -65,6 +65,20 @@ class BruteForceDETP(Estimator):
                    d.radius, d.slab, d.eps, d.kernel, self.acc, self.crossings)
         self.segments += batch.segment_count
         self.seconds += time.perf_counter() - t0
+
+    def take(self):
+        sums = {"irradiance": self.acc, "crossings": int(self.crossings.sum()), "segments": self.segments,
+                "seconds": self.seconds}
+        self.acc = np.zeros_like(self.acc)
+        self.crossings[:] = 0
+        self.segments, self.seconds = 0, 0.0
+        return sums
+
+    def absorb(self, sums):
+        self.acc += sums["irradiance"]
+        self.crossings[0] += sums["crossings"]  # finish reads the total only
+        self.segments += sums["segments"]
+        self.seconds += sums["seconds"]
 
     def finish(self):
         n = len(self.texels)

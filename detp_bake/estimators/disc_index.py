@@ -192,7 +192,7 @@ class DiscIndex(Estimator):
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)
         t0 = time.perf_counter()
-        d = make_discs(texels, settings, self.context.scene_radius, self.context.clearance)
+        d = make_discs(texels, settings, self.context.scene_radius, self.context.clearance, self.context.rise)
         self.eps, self.kernel = d.eps, d.kernel
         patch_of = site_of = geo = None
         t1 = time.perf_counter()
@@ -263,15 +263,32 @@ class DiscIndex(Estimator):
         s["query_splat"] += t3 - t2
         s["query"] += t3 - t0
 
+    QUERY_SECONDS = ("query", "query_order", "query_bin", "query_splat")
+
+    def take(self):
+        irradiance = np.empty_like(self.acc)
+        irradiance[self.tree.order] = self.acc  # texel order: another machine's tree may differ
+        sums = {"irradiance": irradiance, "stats": self.stats.sum(axis=0), "bin_tests": self.bin_tests,
+                "segments": self.segments, **{f"seconds_{k}": self.seconds[k] for k in self.QUERY_SECONDS}}
+        self.acc[:] = 0.0
+        self.stats[:] = 0
+        self.bin_tests = self.segments = 0
+        for k in self.QUERY_SECONDS:
+            self.seconds[k] = 0.0
+        return sums
+
+    def absorb(self, sums):
+        self.acc += sums["irradiance"][self.tree.order]
+        self.stats[0] += sums["stats"]  # finish reads the column sums only
+        self.bin_tests += sums["bin_tests"]
+        self.segments += sums["segments"]
+        for k in self.QUERY_SECONDS:
+            self.seconds[k] += sums[f"seconds_{k}"]
+
     def reset(self) -> None:
         """Forget the photons added so far and keep the index: the hybrid estimator splats every
         frame of a range through one index over the static discs."""
-        self.acc[:] = 0.0
-        self.stats[:] = 0
-        self.bin_tests = 0
-        self.segments = 0
-        for key in ("query", "query_order", "query_bin", "query_splat"):
-            self.seconds[key] = 0.0
+        self.take()
 
     def finish(self):
         t0 = time.perf_counter()

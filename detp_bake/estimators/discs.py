@@ -7,7 +7,9 @@ Segment (o, w, L) crosses the disc of texel (x, n, r) when it arrives from the f
 (a) is DESIGN.md's rule; ε absorbs float error for segments ending on the disc's own plane. (b)
 keeps concave surfaces honest: on a surface of radius R, a photon landing ρ from x ends ρ²/(2R)
 before the tangent plane, so (b) with δ = r/4 counts every landing within the disc on any surface
-with R ≥ 2r. Both parts are local to a cylinder of radius r and height δ over the disc, so every
+with R ≥ 2r. The bake narrows δ to what the texel's own surface needs (rise.py: its greatest height
+in front of the tangent plane within r, plus r/50), so a disc on a leaf does not count the photons
+that landed on another leaf lying just in front of it. Both parts are local to a cylinder of radius r and height δ over the disc, so every
 accelerated search bounds that cylinder, and all three estimators find exactly the same crossings.
 
 Weights: constant 1/(πr²), or Epanechnikov 2(1 − d²/r²)/(πr²); both integrate to 1 over the disc.
@@ -22,7 +24,9 @@ import numpy as np
 from ..errors import BakeError
 from ..texels import TexelSet
 
-SLAB = 0.25  # δ as a fraction of r
+SLAB = 0.25  # δ as a fraction of r, at most
+FLAT_SLAB = 0.02  # δ over the texel's own surface rise, as a fraction of r
+RISE_STEP = 0.01  # the rise is rounded up to steps of this fraction of r
 KERNELS = {"constant": 0, "epanechnikov": 1}
 
 
@@ -62,10 +66,11 @@ def disc_radius(texels: TexelSet, settings) -> np.ndarray:
     return texels.per_texel([lm.texel_size for lm in texels.lightmaps]) * float(wide)
 
 
-def make_discs(texels: TexelSet, settings, scene_radius: float, clearance=None) -> Discs:
+def make_discs(texels: TexelSet, settings, scene_radius: float, clearance=None, rise=None) -> Discs:
     """`clearance`: per texel, how far the surface runs in its tangent plane before other
     geometry stands in the way (texels.tangent_clearance); discs are cut to it, so a floor's disc
-    does not reach past the wall beside it into light on the wall's other side."""
+    does not reach past the wall beside it into light on the wall's other side. `rise`: per texel,
+    how far its own surface rises in front of the disc (rise.py); the slab is cut to it."""
     if settings.kernel not in KERNELS:
         raise BakeError(f"setting 'kernel' = {settings.kernel!r}: choose {', '.join(KERNELS)}")
     radius = disc_radius(texels, settings)
@@ -74,9 +79,17 @@ def make_discs(texels: TexelSet, settings, scene_radius: float, clearance=None) 
     if not np.all(radius > 0):
         raise BakeError("disc radius is zero: a lightmap has no texel area (check its UVs)")
     eps = 1e-6 * max(scene_radius, 1e-3)
+    if rise is None:
+        slab = SLAB * radius
+    else:
+        # In steps of r/100, rounded up, with float noise on flat surfaces taken as flat: the discs
+        # of a flat chart keep one slab, which lattice patches (patches.py) need to take them in.
+        step = RISE_STEP * radius
+        steps = np.ceil(np.maximum(np.asarray(rise, np.float64) - 1e-4 * radius, 0.0) / step)
+        slab = np.minimum(SLAB * radius, steps * step + FLAT_SLAB * radius)
     return Discs(np.ascontiguousarray(texels.position, np.float64),
                  np.ascontiguousarray(texels.normal, np.float64),
-                 radius.astype(np.float64), SLAB * radius, eps, KERNELS[settings.kernel])
+                 radius.astype(np.float64), slab.astype(np.float64), eps, KERNELS[settings.kernel])
 
 
 @numba.njit(cache=True, inline="always")

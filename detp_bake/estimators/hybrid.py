@@ -116,11 +116,16 @@ class Hybrid(Estimator):
         static = np.zeros(len(texels), bool)
         for lm in texels.lightmaps:
             static[lm.texels] = lm.name not in moving
-        clearance = self.context.clearance
-        part = lambda mask: None if clearance is None else clearance[mask]
-        scene_radius = self.context.scene_radius
+        clearance, rise = self.context.clearance, self.context.rise
+        scene_radius, expected = self.context.scene_radius, self.context.expected_segments
+
+        def context(mask):  # the bake's context for the texels of `mask`
+            return Context(scene_radius, expected, None if clearance is None else clearance[mask],
+                           None if rise is None else rise[mask])
+
         static_texels = select(texels, static)
-        discs = make_discs(static_texels, settings, scene_radius, part(static))
+        sub = context(static)
+        discs = make_discs(static_texels, settings, scene_radius, sub.clearance, sub.rise)
         kept = state.keep.get(self.name) if state is not None else None
         self.reused = kept is not None and kept.serves(static, texels.pixel[static], discs, settings)
         if self.reused:
@@ -128,8 +133,7 @@ class Hybrid(Estimator):
             kept.index.progress = self.progress
             changed = kept.changed(discs)
         else:
-            index = DiscIndex(static_texels, settings, progress,
-                              Context(scene_radius, self.context.expected_segments, part(static)))
+            index = DiscIndex(static_texels, settings, progress, sub)
             kept = _Kept(index, static.copy(), texels.pixel[static].copy(), discs, settings)
             if state is not None:
                 state.keep[self.name] = kept
@@ -145,10 +149,9 @@ class Hybrid(Estimator):
         self.segments = 0
         if self.cache_rows.size:
             cached_texels = select(texels, cached)
-            self.cache = MOVING[settings.hybrid_moving](cached_texels, settings, progress,
-                                                        Context(scene_radius, self.context.expected_segments,
-                                                                part(cached)))
-            cached_discs = make_discs(cached_texels, settings, scene_radius, part(cached))
+            sub = context(cached)
+            self.cache = MOVING[settings.hybrid_moving](cached_texels, settings, progress, sub)
+            cached_discs = make_discs(cached_texels, settings, scene_radius, sub.clearance, sub.rise)
             self.box_lo, self.box_hi = _boxes(cached_discs)
             self.eps = cached_discs.eps
         self.seconds_build = time.perf_counter() - t0
@@ -165,6 +168,32 @@ class Hybrid(Estimator):
             self.kept_segments += near.segment_count
             self.cache.add(near)
 
+    def _parts(self):
+        """(label, rows, estimator) of the static and the moving part, in that order: rows of a
+        static texel rerouted this frame are in both, and the moving part's value is the one kept."""
+        if len(self.static_rows):
+            yield "static", self.static_rows, self.index
+        if self.cache is not None:
+            yield "moving", self.cache_rows, self.cache
+
+    def take(self):
+        irradiance = np.zeros((len(self.texels), 3))
+        sums = {"segments": self.segments, "near": self.kept_segments}
+        self.segments = self.kept_segments = 0
+        for label, rows, est in self._parts():
+            part = est.take()
+            irradiance[rows] = part.pop("irradiance")
+            sums.update({f"{label}/{k}": v for k, v in part.items()})
+        sums["irradiance"] = irradiance
+        return sums
+
+    def absorb(self, sums):
+        self.segments += sums["segments"]
+        self.kept_segments += sums["near"]
+        for label, rows, est in self._parts():
+            part = {k.split("/", 1)[1]: v for k, v in sums.items() if k.startswith(label + "/")}
+            est.absorb({**part, "irradiance": sums["irradiance"][rows]})
+
     def finish(self):
         out = np.zeros((len(self.texels), 3))
         counters = {"static_texels": int(len(self.static_rows)), "moving_texels": int(len(self.cache_rows)) -
@@ -172,11 +201,7 @@ class Hybrid(Estimator):
                     "seconds_build": self.seconds_build, "crossings": 0, "segments": self.segments,
                     "moving_segments_near": self.kept_segments,
                     "moving_boxes": 0 if self.cache is None else len(self.box_lo) - 1}
-        parts = [("static", self.static_rows, self.index if len(self.static_rows) else None),
-                 ("moving", self.cache_rows, self.cache)]
-        for label, rows, est in parts:
-            if est is None:
-                continue
+        for label, rows, est in self._parts():
             got = est.finish()
             out[rows] = got.irradiance
             # Crossings of rerouted texels' indexed discs are counted too (they are not used).

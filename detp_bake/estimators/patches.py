@@ -241,11 +241,11 @@ def form_patches(keys_sorted, order, li, lj, centre, normal, radius, slab, latti
 def patch_splat(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc):
     """Add segment i to the discs of patch p it crosses; returns (disc tests, crossings). Inlined
     into the traversal: a call would take and release a reference to every array it is passed."""
-    mode, px, py, pz, dp = _point(p, geo, o, w, length, i, eps)
+    mode, px, py, pz, dp, hb, dh = _point(p, geo, o, w, length, i, eps)
     if mode == 0:
         return 0, 0
     if mode == 1:
-        return _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, px, py, pz, dp)
+        return _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, px, py, pz, dp, hb, dh)
     # In doubt (grazing, or ending within rounding of the plane or the slab): test every disc.
     tests = 0
     hits = 0
@@ -260,8 +260,9 @@ def patch_splat(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc):
 @numba.njit(cache=True, inline="always")
 def _point(p, geo, o, w, length, i, eps):
     """Where segment i meets patch p for every disc of it at once: (0, ...) when it crosses none,
-    (1, x, y, z, dp) when each disc's rule measures from a point within dp of (x, y, z), (2, ...)
-    when in doubt."""
+    (1, x, y, z, dp, h, dh) when each disc's rule measures from a point within dp of (x, y, z),
+    (2, ...) when in doubt. Under rule (b), h is the end's height over the patch's plane, each
+    disc's own within dh (its slab decides); under rule (a), h = −inf."""
     n0, n1, n2 = geo[p, NRM], geo[p, NRM + 1], geo[p, NRM + 2]
     tol_c, tol_n, tol_h = geo[p, TOL_C], geo[p, TOL_N], geo[p, TOL_H]
     ox, oy, oz = np.float64(o[i, 0]), np.float64(o[i, 1]), np.float64(o[i, 2])
@@ -269,9 +270,9 @@ def _point(p, geo, o, w, length, i, eps):
     wn = wx * n0 + wy * n1 + wz * n2
     tn = tol_n * (1.0 + 1e-6) + 1e-15
     if wn >= tn:
-        return 0, 0.0, 0.0, 0.0, 0.0  # every disc faces away: w·n_j ≥ w·n − |w|·|n_j − n| > 0
+        return 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0  # every disc faces away: w·n_j ≥ w·n − |w|·|n_j − n| > 0
     if wn > -tn:
-        return 2, 0.0, 0.0, 0.0, 0.0
+        return 2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     dx, dy, dz = geo[p, C0] - ox, geo[p, C0 + 1] - oy, geo[p, C0 + 2] - oz
     big = np.sqrt(dx * dx + dy * dy + dz * dz) + geo[p, DIAM]  # ≥ |c_j − o|
     t = (dx * n0 + dy * n1 + dz * n2) / wn
@@ -280,11 +281,11 @@ def _point(p, geo, o, w, length, i, eps):
     dt = (tol_h + (big + abs(t)) * tol_n * (1.0 + 1e-6) + rho) / (-wn - tn)
     limit = length[i] + eps
     if t + dt <= 0.0:
-        return 0, 0.0, 0.0, 0.0, 0.0  # t_j ≤ 0 for every disc
+        return 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0  # t_j ≤ 0 for every disc
     if t - dt > 0.0 and t + dt <= limit:  # rule (a) for every disc: the plane hit
-        return 1, ox + t * wx, oy + t * wy, oz + t * wz, dt * (1.0 + 1e-6) + tol_c + rho
+        return 1, ox + t * wx, oy + t * wy, oz + t * wz, dt * (1.0 + 1e-6) + tol_c + rho, -np.inf, 0.0
     if t - dt <= limit:
-        return 2, 0.0, 0.0, 0.0, 0.0
+        return 2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     # Rule (b) for every disc: the end, if within the slab; e as crossing_weight computes it (float32).
     ex = np.float64(o[i, 0] + length[i] * w[i, 0])
     ey = np.float64(o[i, 1] + length[i] * w[i, 1])
@@ -294,10 +295,10 @@ def _point(p, geo, o, w, length, i, eps):
     h = fx * n0 + fy * n1 + fz * n2
     dh = tol_h + (np.sqrt(fx * fx + fy * fy + fz * fz) + geo[p, DIAM]) * tol_n + de + rho
     if h - dh > geo[p, SLAB]:
-        return 0, 0.0, 0.0, 0.0, 0.0
+        return 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     if h + dh > geo[p, SLAB]:
-        return 2, 0.0, 0.0, 0.0, 0.0
-    return 1, ex - h * n0, ey - h * n1, ez - h * n2, dh + (abs(h) + dh) * tol_n + tol_c + de + rho
+        return 2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    return 1, ex - h * n0, ey - h * n1, ez - h * n2, dh + (abs(h) + dh) * tol_n + tol_c + de + rho, h, dh
 
 
 @numba.njit(cache=True, inline="always")
@@ -313,9 +314,35 @@ def _add(d, disc, o, w, length, flux, i, eps, kernel, acc):
 
 
 @numba.njit(cache=True, inline="always")
-def _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, px, py, pz, dp):
+def _cut_site(d, disc, kernel, px, py, pz, dp, hb, dh):
+    """Whether cut disc d is crossed: 1 surely, 0 surely not, 2 in doubt (crossing_weight decides).
+    The point is within dp of where its rule measures, the end's height within dh of its own."""
+    if kernel != 0:
+        return 2
+    if hb != -np.inf:  # rule (b): the end must lie within this disc's own slab
+        if hb - dh > disc[7, d]:
+            return 0
+        if hb + dh > disc[7, d]:
+            return 2
+    r = disc[6, d]
+    slack = 1e-9 * r
+    qx, qy, qz = px - disc[0, d], py - disc[1, d], pz - disc[2, d]
+    q2 = qx * qx + qy * qy + qz * qz
+    r_out = r + dp + slack
+    if q2 > r_out * r_out:
+        return 0
+    r_in = r - dp - slack
+    if r_in > 0.0 and q2 < r_in * r_in:
+        return 1
+    return 2
+
+
+@numba.njit(cache=True, inline="always")
+def _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, px, py, pz, dp, hb, dh):
     """Sites within r of the point (px, py, pz), each row's run from one square root. Within
-    dp + slack of the circle, and for the Epanechnikov kernel, crossing_weight decides."""
+    dp + slack of the circle, and for the Epanechnikov kernel, crossing_weight decides. A disc cut
+    short (by tangent clearance: its own radius and slab) is decided the same way on its own
+    circle and slab, by one distance."""
     r = geo[p, RAD]
     slack = 1e-9 * r
     r_in = r - dp - slack
@@ -362,8 +389,17 @@ def _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, px, py, p
             if d == -1:
                 continue
             if d < -1:  # a disc cut short: the certain run does not hold for it
-                tests += 1
-                hits += _add(-d - 2, disc, o, w, length, flux, i, eps, kernel, acc)
+                c = _cut_site(-d - 2, disc, kernel, px, py, pz, dp, hb, dh)
+                if c == 1:
+                    dd = -d - 2
+                    k = disc[8, dd]  # 1/(πr²) as crossing_weight computes it, to the bit
+                    hits += 1
+                    acc[dd, 0] += k * f0
+                    acc[dd, 1] += k * f1
+                    acc[dd, 2] += k * f2
+                elif c == 2:
+                    tests += 1
+                    hits += _add(-d - 2, disc, o, w, length, flux, i, eps, kernel, acc)
             elif in_lo <= il <= in_hi:
                 hits += 1
                 acc[d, 0] += k_in * f0

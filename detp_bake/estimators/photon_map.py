@@ -29,6 +29,14 @@ class PhotonMap(Estimator):
     def add(self, batch):
         self._parts.append((batch.hit_position, batch.hit_dir, batch.hit_flux, batch.hit_normal))
 
+    def take(self):
+        sums = {"parts": self._parts}
+        self._parts = []
+        return sums
+
+    def absorb(self, sums):
+        self._parts.extend(sums["parts"])
+
     def finish(self):
         t0 = time.perf_counter()
         n = len(self.texels)

@@ -115,7 +115,7 @@ class SphereCache(Estimator):
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)
         t0 = time.perf_counter()
-        self.discs = make_discs(texels, settings, self.context.scene_radius, self.context.clearance)
+        self.discs = make_discs(texels, settings, self.context.scene_radius, self.context.clearance, self.context.rise)
         self.sphere_centre, self.sphere_radius = self.discs.bounding_spheres()
         q = float(settings.q)
         r0 = 2.0 * self.context.scene_radius  # contains the scene wherever its centre is
@@ -158,6 +158,22 @@ class SphereCache(Estimator):
             self.progress(b / chunks)
         self.segments += len(length)
         self.seconds_query += time.perf_counter() - t0
+
+    def take(self):
+        self._flush()
+        sums = {"irradiance": self.acc, "stats": self.stats.sum(axis=0), "segments": self.segments,
+                "seconds_query": self.seconds_query}
+        self.acc = np.zeros_like(self.acc)
+        self.stats[:] = 0
+        self.segments, self.seconds_query = 0, 0.0
+        return sums
+
+    def absorb(self, sums):
+        self._flush()
+        self.acc += sums["irradiance"]
+        self.stats[0] += sums["stats"]  # finish reads the column sums only
+        self.segments += sums["segments"]
+        self.seconds_query += sums["seconds_query"]
 
     def finish(self):
         self._flush()

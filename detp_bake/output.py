@@ -1,0 +1,102 @@
+"""What the command line says, and where: stdout holds only the files a run wrote (one path a line,
+or one JSON summary with `--json`), so that scripts can read it; progress, notes and warnings go to
+stderr. Blender prints from C to the process's stdout ("Read blend: …", Lightmap Pack's chatter),
+so around Blender calls file descriptor 1 itself is pointed at stderr (or discarded).
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+from contextlib import contextmanager, redirect_stdout
+from pathlib import Path
+
+
+def _flush_c_stdio() -> None:
+    """Push out what C code left in its stdout buffer, before descriptor 1 changes again."""
+    try:
+        import ctypes
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):
+        pass  # no C library to reach (Windows): Blender flushes its own lines there
+
+
+@contextmanager
+def quiet_stdout(to: str = "stderr"):
+    """Within the block, everything written to stdout, from Python or from C, goes to stderr
+    (`to="stderr"`) or nowhere (`to="null"`)."""
+    sys.stdout.flush()
+    _flush_c_stdio()
+    saved = os.dup(1)
+    target = os.open(os.devnull, os.O_WRONLY) if to == "null" else os.dup(2)
+    python_out = open(os.devnull, "w") if to == "null" else sys.stderr
+    try:
+        os.dup2(target, 1)
+        with redirect_stdout(python_out):  # Python's prints too, wherever sys.stdout points
+            yield
+    finally:
+        sys.stdout.flush()
+        _flush_c_stdio()
+        os.dup2(saved, 1)
+        os.close(target)
+        os.close(saved)
+        if to == "null":
+            python_out.close()
+
+
+def log(msg: str) -> None:
+    print(f"detp_bake: {msg}", file=sys.stderr, flush=True)
+
+
+class Warnings(list):
+    """Warnings said on stderr as they come, and kept for report.json and `--json`."""
+
+    def __call__(self, msg: str) -> None:
+        self.append(msg)
+        log(f"warning: {msg}")
+
+
+def written(summary: dict, as_json: bool = False) -> None:
+    """The run's result on stdout: every file written, one a line, or the summary as JSON."""
+    if as_json:
+        print(json.dumps(summary, indent=2, default=str), flush=True)
+        return
+    for path in _paths(summary.get("files", {})):
+        print(path)
+    for path in summary.get("extra", []):
+        print(path)
+    print(summary["report"])
+    if summary.get("saved"):
+        print(summary["saved"])
+    sys.stdout.flush()
+
+
+def _paths(files):
+    """The paths in {object: [paths]}, or {estimator: {object: [paths]}}, in order."""
+    for value in files.values():
+        if isinstance(value, dict):
+            yield from _paths(value)
+        else:
+            yield from value
+
+
+def warn_stale(out_dir: Path, result, warn) -> None:
+    """One warning listing the lightmaps of the objects being baked, with this estimator, that an
+    earlier bake left in `out_dir` and this one will not replace (a PNG from an exr,png bake, a raw
+    EXR from a --keep-raw bake). They are left alone, as is every other file there."""
+    from .bake import output_paths
+    from .images import file_stems
+    writing = {p.name for targets in output_paths(result, out_dir).values() for p in targets}
+    stale = sorted(name for stem in file_stems(result.images).values() for suffix in ("exr", "png", "raw.exr")
+                   for name in [f"{stem}.{result.settings.estimator}.{suffix}"]
+                   if name not in writing and (out_dir / name).is_file())
+    if stale:
+        warn(f"{len(stale)} lightmaps in {out_dir} from an older bake of the same objects are left as they "
+             f"were (not written this time): {', '.join(stale[:8])}{' …' if len(stale) > 8 else ''}")
+
+
+def gather_warnings(result, warn) -> None:
+    """The bake's own warnings said too; the result (report.json) then holds all of them."""
+    for w in result.warnings:
+        warn(w)
+    result.warnings = list(warn)

@@ -1,0 +1,222 @@
+"""Bakes on a Dask cluster (distributed.py): identical to a local bake whatever the workers do,
+a dead worker's units run again, a failing unit and an unreachable scheduler said plainly.
+One LocalCluster of two worker processes serves the whole module."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("distributed")
+
+from conftest import CORNELL, ROOT  # noqa: E402
+from detp_bake import texels as texels_mod  # noqa: E402
+from detp_bake.bake import BakeSettings, Progress, TraceJob, compute  # noqa: E402
+from detp_bake.cli import main  # noqa: E402
+from detp_bake.distributed import Cluster  # noqa: E402
+from detp_bake.errors import BakeError  # noqa: E402
+from detp_bake.estimators import Context, EstimatorSettings  # noqa: E402
+from detp_bake.scene import PointLight  # noqa: E402
+from synthetic import make_scene, uv_sphere  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with Cluster(workers=2) as c:
+        yield c
+
+
+def _sphere():
+    return make_scene([("Sphere", uv_sphere(1.0, 24, 48, inward=True), 0.5, True)],
+                      [PointLight("Lamp", np.zeros(3), np.full(3, 100.0))], resolution=32)
+
+
+def _settings(name, photons=200_000):
+    return BakeSettings(estimator=name, photons=photons, bounces=3, batch_size=20_000, denoise=False,
+                        estimator_settings=EstimatorSettings(radius=0.1))
+
+
+def _same(a, b):
+    assert np.array_equal(a.value, b.value)
+    for name in a.images:
+        assert np.array_equal(a.images[name], b.images[name])
+    ra, rb = a.report(), b.report()
+    for key in ("photons", "segments", "hits", "flux", "noise"):
+        assert ra[key] == rb[key], key
+
+
+def test_a_local_bake_imports_no_dask():
+    code = ("import sys, detp_bake.bake, detp_bake.cli, detp_bake.distributed, detp_bake.estimators as e; "
+            "e.names(); bad = [m for m in sys.modules if m.split('.')[0] in ('dask', 'distributed')]; "
+            "assert not bad, bad")
+    proc = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, PYTHONPATH=str(ROOT)),
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+
+
+@pytest.mark.parametrize("name", ["disc_index", "sphere_cache", "photon_map"])
+def test_two_workers_bake_exactly_what_one_process_bakes(cluster, name):
+    sc = _sphere()
+    local = compute(sc, _settings(name))
+    far = compute(sc, _settings(name), cluster=cluster)
+    _same(local, far)
+    assert far.cluster["workers"] == 2 and far.cluster["units"] >= 3 and far.cluster["resubmitted"] == 0
+    assert "cluster" in far.report() and "cluster" not in local.report()
+
+
+def test_a_noise_target_stops_at_the_same_batch_as_here(cluster):
+    sc = _sphere()
+    settings = BakeSettings(estimator="disc_index", photons=2_000_000, bounces=3, batch_size=20_000, denoise=False,
+                            target_noise=4.0, estimator_settings=EstimatorSettings(radius=0.1))
+    local = compute(sc, settings)
+    far = compute(sc, settings, cluster=cluster)
+    assert local.stopped_by == far.stopped_by == "target_noise" and local.share < 0.2
+    assert local.share == far.share
+    _same(local, far)
+
+
+def test_a_killed_worker_loses_only_its_units(cluster):
+    """SIGKILL to the worker that just took a unit: the scheduler runs the unit again elsewhere,
+    the lightmap is the same bit for bit and the report counts the unit."""
+    sc, settings = _sphere(), _settings("disc_index", 400_000)
+    local = compute(sc, settings)
+    client = cluster.client
+    pids = client.run(os.getpid)
+    killed = []
+
+    def progress(p: Progress):
+        if p.phase == "trace" and not killed:
+            busy = {a: max(int(k.rsplit("-", 1)[1]) for k in keys) for a, keys in client.processing().items() if keys}
+            if busy:
+                victim = max(busy, key=busy.get)
+                os.kill(pids[victim], signal.SIGKILL)
+                killed.append(victim)
+    far = compute(sc, settings, progress, cluster=cluster)
+    assert killed
+    _same(local, far)
+    assert far.cluster["resubmitted"] >= 1
+    client.wait_for_workers(2, timeout=60)  # the nanny starts a new one: the module goes on with two
+
+
+def test_a_failing_unit_stops_the_bake_with_the_workers_message(cluster):
+    sc = _sphere()
+    job = TraceJob(sc, texels_mod.rasterise(sc), _settings("disc_index"), ["no_such_estimator"], 1, 20_000, 0.0,
+                   Context())
+    t0 = time.perf_counter()
+    with pytest.raises(BakeError, match=r"batch [01]\) failed on worker tcp://.*unknown estimator 'no_such_estimator'"):
+        list(cluster.partials(job, [range(0, 1), range(1, 2)], lambda: False, lambda n: None, (0, 0)))
+    assert time.perf_counter() - t0 < 30
+
+
+def test_an_unreachable_scheduler_fails_fast_naming_the_address(capsys, tmp_path):
+    t0 = time.perf_counter()
+    code = main(["bake", str(CORNELL), "--out", str(tmp_path), "--scheduler", "tcp://127.0.0.1:9",
+                 "--connect-timeout", "1"])
+    err = capsys.readouterr().err
+    assert code == 2 and "could not reach the scheduler at tcp://127.0.0.1:9 within 1 s" in err, err
+    assert time.perf_counter() - t0 < 15
+    assert not list(tmp_path.iterdir())
+
+
+def test_the_cli_through_a_scheduler_writes_the_same_files(cluster, tmp_path, bpy):
+    args = ["bake", str(CORNELL), "--objects", "Floor", "TallBox", "--photons", "60000", "--resolution", "16",
+            "--no-denoise"]
+    assert main(args + ["--out", str(tmp_path / "here")]) == 0
+    assert main(args + ["--out", str(tmp_path / "far"), "--scheduler", cluster.address]) == 0
+    for name in ("Floor.disc_index.exr", "TallBox.disc_index.exr"):
+        assert (tmp_path / "here" / name).read_bytes() == (tmp_path / "far" / name).read_bytes()
+    report = json.loads((tmp_path / "far" / "report.json").read_text())
+    assert report["cluster"]["workers"] == 2 and report["cluster"]["address"] == cluster.address
+
+
+def test_the_preferences_button_reports_the_workers_and_their_cores(cluster, bpy, capfd, monkeypatch):
+    from test_addon import PACKAGE, _import_addon
+    module = _import_addon()
+    module.register()
+    entry = bpy.context.preferences.addons.new()
+    entry.module = PACKAGE
+    try:
+        prefs = bpy.context.preferences.addons[PACKAGE].preferences
+        prefs.scheduler_address = cluster.address
+        capfd.readouterr()
+        assert bpy.ops.detp_bake.test_cluster() == {"FINISHED"}
+        said = capfd.readouterr()
+        assert f"{cluster.address}: 2 workers, 2 cores" in said.out + said.err, said
+        prefs.scheduler_address = "tcp://127.0.0.1:9"
+        monkeypatch.setattr(sys.modules["detp_bake_addon.ui.preferences"], "CONNECT_TIMEOUT", 1.0)
+        with pytest.raises(RuntimeError, match="could not reach the scheduler at tcp://127.0.0.1:9"):
+            bpy.ops.detp_bake.test_cluster()
+    finally:
+        bpy.context.preferences.addons.remove(entry)
+        module.unregister()
+
+
+def test_cancel_cancels_the_units_still_out_and_writes_nothing(cluster, tmp_path):
+    from detp_bake.bake import bake
+    from detp_bake.errors import BakeCancelled
+    import threading
+    cancel = threading.Event()
+
+    def progress(p: Progress):
+        if p.phase == "trace":
+            cancel.set()
+    with pytest.raises(BakeCancelled):
+        bake(_sphere(), _settings("disc_index", 400_000), tmp_path, progress, cancel, cluster=cluster)
+    assert not list(tmp_path.iterdir())
+    left = None
+    for _ in range(50):
+        left = cluster.client.run_on_scheduler(
+            lambda dask_scheduler=None: [k for k, t in dask_scheduler.tasks.items()
+                                         if "detp_bake-unit" in str(k) and t.state in ("processing", "queued", "no-worker")])
+        if not left:
+            break
+        time.sleep(0.1)
+    assert not left
+
+
+def test_units_are_sized_by_the_workers_memory_limit(cluster):
+    limit = cluster.describe()["memory_limit"]
+    blocks = [range(b, b + 1) for b in range(60)]
+    assert [len(u) for u in cluster._units(blocks, (0, 1))] == [10] * 6  # three per worker thread
+    per_block = int(0.1 * limit)
+    units = cluster._units(blocks, (int(0.6 * limit) - int(2.5 * per_block), per_block))
+    assert max(len(u) for u in units) == 2 and sum(len(u) for u in units) == 60
+    with pytest.raises(BakeError, match=r"memory limit of worker tcp://"):
+        cluster._units(blocks, (int(0.6 * limit), per_block))
+
+
+def test_the_core_uploaded_to_a_worker_imports_without_blender(tmp_path):
+    from detp_bake.distributed import core_bootstrap
+    source, digest = core_bootstrap()
+    (tmp_path / "boot.py").write_text(source)
+    code = ("import sys, boot, detp_bake.distributed, detp_bake.bake, os; "
+            "assert detp_bake.__file__.startswith(boot._HOME), detp_bake.__file__; "
+            "assert not os.path.exists(os.path.join(boot._HOME, 'detp_bake', 'blender')); "
+            "assert 'bpy' not in sys.modules")
+    env = dict(os.environ, PYTHONPATH=str(tmp_path), TMPDIR=str(tmp_path))
+    proc = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / f"detp_bake_core_{digest}" / "detp_bake" / "photons.py").is_file()
+
+
+def test_classes_travel_by_their_core_name_from_blenders_package_path(monkeypatch):
+    """In Blender the core is bl_ext.<repo>.detp_bake.detp_bake: what the client pickles must
+    name detp_bake.… for workers that have the core alone."""
+    import pickle
+    from detp_bake import distributed, scene
+    prefix = "bl_ext.user_default.detp_bake.detp_bake"
+    monkeypatch.setattr(distributed, "_PREFIX", prefix)
+    stand_in = type("BakeObject", (), {"__module__": prefix + ".scene"})
+
+    def run_unit():
+        pass
+    run_unit.__module__, run_unit.__qualname__ = prefix + ".distributed", "run_unit"
+    data = distributed._dumps({"object": stand_in, "function": run_unit, "run": distributed._by_name(run_unit)})
+    assert b"bl_ext" not in data
+    back = pickle.loads(data)
+    assert back["object"] is scene.BakeObject
+    assert back["function"] is distributed.run_unit and back["run"] is distributed.run_unit

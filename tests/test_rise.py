@@ -1,0 +1,67 @@
+"""The DETP slab's measure of a texel's own surface (estimators/rise.py): flat pieces get none,
+curved ones what their curvature needs, and another piece in front counts for nothing."""
+import numpy as np
+
+from detp_bake.estimators.rise import mesh_pieces, own_surface_rise
+from detp_bake.scene import PointLight
+from detp_bake.texels import rasterise
+from synthetic import grid, make_scene, uv_sphere
+
+LAMP = [PointLight("Lamp", np.zeros(3), np.full(3, 1.0))]
+
+
+def test_pieces_are_the_welded_components():
+    a = grid(1.0, 1.0, 3)[0]
+    b = grid(1.0, 1.0, 2, z=0.005)[0]
+    both = np.concatenate([a, b]).astype(np.float32)
+    label = mesh_pieces(both)
+    assert len(set(label[:len(a)])) == 1 and len(set(label[len(a):])) == 1
+    assert label[0] != label[-1]
+
+
+def test_flat_plates_have_no_rise_even_with_a_plate_in_front():
+    upper, lower = grid(1.0, 1.0, 4, z=0.005), grid(1.0, 1.0, 4, z=0.0)
+    # One object holding both plates: two pieces, so the upper one is not the lower one's surface.
+    both = (np.concatenate([upper[0], lower[0]]), np.concatenate([upper[1], lower[1]]),
+            np.concatenate([upper[2], lower[2]]))
+    sc = make_scene([("Plates", both, 0.5, True)], LAMP, resolution=32)
+    texels = rasterise(sc)
+    radius = np.full(len(texels), 3.0 / 32 * np.sqrt(2.0))
+    rise = own_surface_rise(texels, sc, radius)
+    assert np.isfinite(rise).all()
+    assert np.abs(rise).max() < 1e-6
+
+
+def test_inside_a_sphere_the_rise_is_what_the_curvature_gives():
+    """Inside a sphere of radius R the surface stands ρ²/(2R) in front of the tangent plane at ρ:
+    r²/(2R) at the rim, up to the facets' own tilt."""
+    big, r = 1.0, 0.12
+    sc = make_scene([("Sphere", uv_sphere(big, 24, 48, inward=True), 0.5, True)], LAMP, resolution=96)
+    texels = rasterise(sc)
+    rise = own_surface_rise(texels, sc, np.full(len(texels), r))
+    assert np.isfinite(rise).mean() > 0.99
+    ratio = rise[np.isfinite(rise)] / (r * r / (2 * big))
+    assert 0.8 < np.median(ratio) < 1.5
+    assert np.quantile(ratio, 0.05) > 0.5
+
+
+def test_texels_sparser_than_the_disc_keep_the_full_slab():
+    """On a piece of more than SMALL_PIECE vertices, too few texels say nothing: inf."""
+    sc = make_scene([("Plate", grid(1.0, 1.0, 8), 0.5, True)], LAMP, resolution=4)
+    texels = rasterise(sc)
+    rise = own_surface_rise(texels, sc, np.full(len(texels), 0.05))  # texels are 0.25 m apart
+    assert np.isinf(rise).all()
+
+
+def test_a_leaf_smaller_than_its_disc_is_measured_from_its_vertices():
+    """A leaf card of a texel or two has no texel of its own around its disc: its vertices say
+    it is flat (a folded one rises by its fold)."""
+    flat = grid(0.1, 0.05, 1, z=1.0)
+    folded = grid(0.1, 0.05, 2, z=2.0)
+    folded[0][:, :, 2] += np.where(np.abs(folded[0][:, :, 0]) > 0.04, 0.01, 0.0)  # edges bent up 1 cm
+    sc = make_scene([("Flat", flat, 0.5, True), ("Folded", folded, 0.5, True)], LAMP, resolution=2)
+    texels = rasterise(sc)
+    rise = own_surface_rise(texels, sc, np.full(len(texels), 0.3))
+    flat_lm, folded_lm = texels.lightmaps
+    assert np.allclose(rise[flat_lm.texels], 0.0, atol=1e-7)
+    assert np.all(rise[folded_lm.texels] > 0.004)
