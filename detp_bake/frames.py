@@ -271,6 +271,7 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
             result.frames.append(frame)
             result.files[frame] = baked.files
             _write_report(result, frames, settings_report, evaluate_seconds, time.perf_counter() - t_start)
+            report(bake_mod.Progress("frame", 1.0, f"{label} · written"))
             del baked, scene
     except BakeCancelled:
         result.cancelled = True

@@ -107,3 +107,25 @@ def test_first_and_a_later_frame_match_cycles(tmp_path, capsys, bpy):
             covered = ref[name].sum(axis=2) > 0
             ratio = ours[covered].mean() / ref[name][covered].mean()
             assert abs(ratio - 1.0) < 0.03, (frame, name, ratio)
+
+
+def test_ctrl_c_keeps_the_finished_frames(tmp_path):
+    """Ctrl+C during the second frame: exit code 130, the first frame's lightmaps and a report that
+    lists it, nothing of the second frame, no hidden temporary file."""
+    import signal
+
+    from test_robustness import _start, _wait_for
+
+    out = tmp_path / "out"
+    proc = _start(["bake", str(QUASI_STATIC), "--frames", "1-3", "--out", str(out), "--photons", "1500000",
+                   "--resolution", "16", "--no-denoise", "--estimator", "hybrid"], tmp_path)
+    seen = _wait_for(proc, "Frame 1/3 · written")  # frame 2 has a second or more of tracing ahead
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, "".join(seen) + stderr
+    assert "cancelled: kept the 1 finished frames of 3" in stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["frames"]["done"] == [1] and report["frames"]["cancelled"] is True
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted([f"{o}.hybrid.0001.exr" for o in ("Floor", "Ceiling", "BackWall", "FrontWall", "LeftWall",
+                                                             "RightWall", "Table", "Mover")] + ["report.json"])
