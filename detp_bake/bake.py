@@ -180,14 +180,16 @@ def _cancel_fn(cancel) -> Callable[[], bool]:
 
 
 def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[Progress], None]] = None,
-            cancel=None, cluster=None) -> BakeResult:
+            cancel=None, cluster=None, frame_state: Optional[estimators.FrameState] = None) -> BakeResult:
     """Trace, estimate and dilate; nothing touches the disk. Raises BakeError or BakeCancelled.
-    `cluster` (a distributed.Cluster) traces the photons on its workers instead of here."""
-    return compute_many(scene, settings, [settings.estimator], progress, cancel, cluster)[settings.estimator]
+    `cluster` (a distributed.Cluster) traces the photons on its workers instead of here.
+    `frame_state`: one frame of a range (frames.py), shared by the range's frames."""
+    return compute_many(scene, settings, [settings.estimator], progress, cancel, cluster,
+                        frame_state)[settings.estimator]
 
 
 def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional[Callable[[Progress], None]] = None,
-                 cancel=None, cluster=None) -> dict:
+                 cancel=None, cluster=None, frame_state: Optional[estimators.FrameState] = None) -> dict:
     """Like `compute`, for several estimators fed the very same photons: every batch goes to each
     of them as it is traced. Returns {estimator name: BakeResult}. `settings.threads` (0: all
     cores) holds for tracing, shadow rays and the compiled estimators alike."""
@@ -196,12 +198,12 @@ def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional
     if settings.threads:
         numba.set_num_threads(max(1, min(int(settings.threads), numba.config.NUMBA_NUM_THREADS)))
     try:
-        return _compute_many(scene, settings, names, progress, cancel, cluster)
+        return _compute_many(scene, settings, names, progress, cancel, cluster, frame_state)
     finally:
         numba.set_num_threads(before)
 
 
-def _compute_many(scene, settings, names, progress, cancel, cluster=None) -> dict:
+def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_state=None) -> dict:
     names = list(dict.fromkeys(names))
     if settings.estimator_settings.radius_texels is None:
         texels_wide = estimators.RADIUS_TEXELS_INDIRECT if settings.direct == "sampled" else estimators.RADIUS_TEXELS_ALL
@@ -241,8 +243,13 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None) -> dic
             if cancelled():
                 raise BakeCancelled()
             report(Progress("direct", fraction, f"Direct light {100 * fraction:.0f} %"))
-        direct_e, info = direct_mod.direct_irradiance(scene, texels, caster, settings.direct_samples,
-                                                      settings.seed, tracer.threads, direct_progress, cancelled)
+        if frame_state is not None:  # a frame of a range: re-sampled only where it can change
+            from . import frame_direct
+            direct_e, info = frame_direct.direct_irradiance(frame_state, scene, texels, caster, settings.direct_samples,
+                                                            settings.seed, tracer.threads, direct_progress, cancelled)
+        else:
+            direct_e, info = direct_mod.direct_irradiance(scene, texels, caster, settings.direct_samples,
+                                                          settings.seed, tracer.threads, direct_progress, cancelled)
         direct_info.update(info)
 
     def estimate_progress(fraction):
@@ -259,7 +266,7 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None) -> dic
         rise = own_surface_rise(texels, scene, radius)
     clearance_seconds = time.perf_counter() - t0
     context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
-                                 clearance=clearance, rise=rise)
+                                 clearance=clearance, rise=rise, frames=frame_state)
     runs, build = {}, {}
     for name in names:
         report(Progress("prepare", 0.5, f"Preparing {name}"))
@@ -572,24 +579,30 @@ def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) ->
     return need
 
 
-def output_paths(result: BakeResult, out_dir: Path) -> dict:
+def output_paths(result: BakeResult, out_dir: Path, frame: Optional[int] = None) -> dict:
+    """<object>.<estimator>.<format>, or <object>.<estimator>.<frame:04d>.<format> for a frame of a
+    range (the number last, as image sequences want it)."""
     stems = images.file_stems(result.images)
-    out = {name: [out_dir / f"{stems[name]}.{result.settings.estimator}.{fmt}"
+    number = "" if frame is None else f".{frame:04d}"
+    out = {name: [out_dir / f"{stems[name]}.{result.settings.estimator}{number}.{fmt}"
                   for fmt in result.settings.formats] for name in result.images}
     if result.settings.keep_raw and result.raw_images:
         for name, paths in out.items():
-            paths.append(out_dir / f"{stems[name]}.{result.settings.estimator}.raw.exr")
+            paths.append(out_dir / f"{stems[name]}.{result.settings.estimator}.raw{number}.exr")
     return out
 
 
 def write(result: BakeResult, out_dir: str | os.PathLike,
-          progress: Optional[Callable[[Progress], None]] = None, cancel=None) -> Path:
-    """Write every lightmap and report.json; files appear together or not at all."""
-    return write_many({result.settings.estimator: result}, out_dir, progress, cancel)
+          progress: Optional[Callable[[Progress], None]] = None, cancel=None,
+          frame: Optional[int] = None) -> Optional[Path]:
+    """Write every lightmap and report.json; files appear together or not at all. For a `frame` of
+    a range the names carry its number and report.json is left to the range (frames.py)."""
+    return write_many({result.settings.estimator: result}, out_dir, progress, cancel, frame=frame)
 
 
 def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Callable[[Progress], None]] = None,
-               cancel=None, extra: Optional[dict] = None, summary: Optional[dict] = None) -> Path:
+               cancel=None, extra: Optional[dict] = None, summary: Optional[dict] = None,
+               frame: Optional[int] = None) -> Optional[Path]:
     """Write the lightmaps of one or more results ({estimator: BakeResult}, as `compute_many`
     gives), `extra` files ({file name: write(path)}) and one report.json: a single result's report,
     or (several results, or a `summary` given) `summary` and a section per estimator. Everything is staged under hidden
@@ -599,7 +612,7 @@ def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Cal
     cancelled = _cancel_fn(cancel)
     out = images.check_writable_dir(out_dir)
     report = progress or (lambda p: None)
-    paths = {name: output_paths(r, out) for name, r in results.items()}
+    paths = {name: output_paths(r, out, frame) for name, r in results.items()}
     count = sum(len(p) for p in paths.values())
     done = 0
     try:
@@ -608,7 +621,8 @@ def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Cal
                 for name, targets in paths[estimator].items():
                     for target in targets:
                         fmt = target.suffix[1:]
-                        picture = result.raw_images[name] if target.name.endswith(".raw.exr") else result.images[name]
+                        raw = f".{result.settings.estimator}.raw." in target.name
+                        picture = result.raw_images[name] if raw else result.images[name]
                         half = result.settings.half
                         files.stage(target.name, lambda tmp: images.write_exr(tmp, picture, half=half)
                                     if fmt == "exr" else images.WRITERS[fmt](tmp, picture))
@@ -624,18 +638,21 @@ def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Cal
             seconds = time.perf_counter() - t0
             for result in results.values():
                 result.seconds["write"] = seconds
-            if summary is None and len(results) == 1:
+            if frame is not None:
+                pass  # a frame of a range: its report.json is the range's (frames.py)
+            elif summary is None and len(results) == 1:
                 content = next(iter(results.values())).report()
             else:
                 content = {"version": __version__, **(summary or {}),
                            "estimators": {name: r.report() for name, r in results.items()}}
-            files.stage_text("report.json", json.dumps(content, indent=2))
+            if frame is None:
+                files.stage_text("report.json", json.dumps(content, indent=2))
             if cancelled():
                 raise BakeCancelled()
             files.commit()
     except OSError as exc:  # a full disk, a folder gone: nothing of this set is left
         raise BakeError(f"cannot write '{exc.filename or out}': {exc.strerror or exc}") from None
-    return out / "report.json"
+    return None if frame is not None else out / "report.json"
 
 
 def bake(scene: Scene, settings: BakeSettings, out_dir: str | os.PathLike,

@@ -61,6 +61,8 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--radius", type=float, default=None, help="DETP disc radius in metres (overrides texels)")
     b.add_argument("--q", type=float, default=0.65, help="sphere cache radius ratio (default 0.65)")
     b.add_argument("--kernel", default="constant", choices=("constant", "epanechnikov"))
+    b.add_argument("--hybrid-moving", default="sphere_cache", choices=("sphere_cache", "disc_index"),
+                   help="hybrid: estimator for the moving objects' texels (default sphere_cache, the paper's)")
     b.add_argument("--resolution", type=int, default=128, help="lightmap size in pixels (default 128)")
     b.add_argument("--margin", type=int, default=16, help="dilation margin in pixels (default 16)")
     b.add_argument("--bounces", type=int, default=None,
@@ -84,6 +86,14 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--connect-timeout", type=float, default=10.0, metavar="SECONDS",
                    help="give up on the scheduler (or its first worker) after this long (default 10)")
     b.add_argument("--apply", action="store_true", help="wire the lightmaps into the materials")
+    b.add_argument("--frames", default=None, metavar="A-B[:STEP]",
+                   help="bake every frame of this range: <object>.<estimator>.<frame:04d>.exr")
+    b.add_argument("--moving", nargs="+", default=[], metavar="NAME",
+                   help="with --frames: treat these objects as moving (default: found by evaluating the frames)")
+    b.add_argument("--static", nargs="+", default=[], metavar="NAME",
+                   help="with --frames: treat these objects as static")
+    b.add_argument("--force", action="store_true",
+                   help="with --frames: bake again frames unchanged since the last bake into --out (kept by default)")
     b.add_argument("--save", default=None, metavar="OUT.blend", help="save the baked .blend here")
     b.add_argument("--json", action="store_true", help="print a JSON summary on stdout instead of the file list")
 
@@ -97,7 +107,8 @@ def settings_from_args(args) -> bake_mod.BakeSettings:
         resolution=args.resolution, margin=args.margin, formats=formats, half=args.half,
         threads=args.threads,
         estimator_settings=EstimatorSettings(k=args.k, radius_texels=args.radius_texels,
-                                             radius=args.radius, q=args.q, kernel=args.kernel))
+                                             radius=args.radius, q=args.q, kernel=args.kernel,
+                                             hybrid_moving=args.hybrid_moving))
 
 
 def _photons(args) -> int:
@@ -126,6 +137,28 @@ def _log(msg: str) -> None:
 
 def _open_scene(args, settings, bl_scene, warn=output.log):
     """Check the inputs, open the .blend (unless Blender has one open) and export it."""
+    blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene, warn)
+    t0 = time.perf_counter()
+    from .memory import geometry_budget
+    created = []
+    scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
+                                 created, max_bytes=geometry_budget(settings.memory_budget_mb) or None)
+    _warn_created(args, created, warn)
+    _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
+         f"baking {sum(o.bake for o in scene.objects)} objects")
+    return blender, bl_scene, scene, out_dir, time.perf_counter() - t0
+
+
+def _warn_created(args, created, warn) -> None:
+    if created and not args.save:
+        names = [name for name, _ in created]
+        warn(f"UV layer '{created[0][1]}' created on {', '.join(names[:5])}"
+             f"{f' and {len(names) - 5} more' if len(names) > 5 else ''} is not stored anywhere (no --save): "
+             "the lightmaps match it only in a scene saved with it (use --save, or add the layer in Blender)")
+
+
+def _check_and_open(args, settings, bl_scene, warn=output.log):
+    """Check the inputs and open the .blend (unless Blender has one open)."""
     settings.validate()
     if args.apply and "exr" not in settings.formats:
         raise BakeError("--apply needs the exr format in --format")
@@ -147,19 +180,7 @@ def _open_scene(args, settings, bl_scene, warn=output.log):
                         "(make demo sets one up)") from None
     if bl_scene is None:
         bl_scene = blender.open_blend(Path(args.scene))
-    t0 = time.perf_counter()
-    from .memory import geometry_budget
-    created = []
-    scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
-                                 created, max_bytes=geometry_budget(settings.memory_budget_mb) or None)
-    if created and not args.save:
-        names = [name for name, _ in created]
-        warn(f"UV layer '{created[0][1]}' created on {', '.join(names[:5])}"
-             f"{f' and {len(names) - 5} more' if len(names) > 5 else ''} is not stored anywhere (no --save): "
-             "the lightmaps match it only in a scene saved with it (use --save, or add the layer in Blender)")
-    _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
-         f"baking {sum(o.bake for o in scene.objects)} objects")
-    return blender, bl_scene, scene, out_dir, time.perf_counter() - t0
+    return blender, bl_scene, out_dir
 
 
 def _check_cancel(cancel) -> None:
@@ -172,6 +193,8 @@ def run_compare(args, bl_scene=None, cancel=None) -> dict:
     one report.json with a section per estimator, all written together."""
     warn = output.Warnings()
     settings = settings_from_args(args)
+    if args.frames is not None or args.moving or args.static or args.force:
+        raise BakeError("--frames, --moving, --static and --force are for 'bake', not 'compare'")
     for name in args.estimators:
         replace(settings, estimator=name).validate()
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene, warn)
@@ -217,6 +240,8 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
     `cancel()` true stops it before anything is written. Returns the summary `main` prints."""
     warn = output.Warnings()
     settings = settings_from_args(args)
+    if args.frames is not None or args.moving or args.static or args.force:
+        return run_frames(args, settings, bl_scene, cancel, warn)
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene, warn)
     _check_cancel(cancel)
     result = bake_mod.compute(scene, settings, StderrProgress(), cancel, cluster=getattr(args, "cluster", None))
@@ -236,6 +261,48 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
     return {"command": "bake", "files": result.files, "report": str(report), "saved": str(saved) if saved else None,
             "estimator": settings.estimator, "photons": result.stats.photons, "stopped_by": result.stopped_by,
             "noise": {n: round(100.0 * v, 3) for n, v in result.noise.items()}, "warnings": list(warn)}
+
+
+def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> dict:
+    """--frames: every frame of the range (frames.py); a cancel keeps the frames finished."""
+    from . import frames
+    if args.frames is None:
+        raise BakeError("--moving, --static and --force need --frames")
+    frame_range = frames.parse_frames(args.frames)
+    if args.apply and frame_range.step != 1:
+        raise BakeError("--apply with --frames needs every frame (a step of 1): an image sequence has no gaps")
+    if getattr(args, "cluster", None) is not None:
+        raise BakeError("--frames bakes here: --scheduler and --workers do not take frame ranges yet")
+    blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene, warn)
+    from .memory import geometry_budget
+    created = []
+    scene_at = blender.frame_exporter(bl_scene, args.objects, args.uv_layer, settings.resolution, _log, created,
+                                      max_bytes=geometry_budget(settings.memory_budget_mb) or None)
+    with blender.frame_kept(bl_scene):
+        result = frames.bake_frames(scene_at, frame_range, settings, out_dir, StderrProgress(), cancel,
+                                    moving=args.moving, static=args.static, log=_log, force=args.force)
+    _warn_created(args, created, warn)
+    if not result.frames:
+        raise BakeCancelled()
+    # The finished frames are in place: from here on a signal no longer undoes them.
+    first = result.frames[0]
+    last = max(f for i, f in enumerate(result.frames) if f == first + i)  # a cancel keeps a shorter sequence
+    if args.apply:
+        blender.apply_all(bl_scene, result.files[first], args.uv_layer, settings.estimator, frames=(first, last))
+        _log(f"applied the lightmaps as image sequences, frames {first}-{last}")
+    saved = None
+    if args.save:
+        saved = Path(args.save).resolve()
+        blender.save_blend(saved, {f"{name}@{frame}": paths for frame, files in result.files.items()
+                                   for name, paths in files.items()})
+        _log(f"saved {saved}")
+    if result.cancelled:
+        _log(f"cancelled: kept the {len(result.frames)} finished frames of {len(frame_range.frames())}")
+    return {"command": "bake", "files": {f"{name}@{frame}": paths for frame in result.frames
+                                         for name, paths in result.files[frame].items()},
+            "report": str(result.report_path), "saved": str(saved) if saved else None,
+            "estimator": settings.estimator, "frames": result.frames, "kept": result.skipped,
+            "moving": result.motion.moving, "cancelled": result.cancelled, "warnings": list(warn)}
 
 
 def _cluster(args):
@@ -272,4 +339,4 @@ def main(argv: Optional[Sequence[str]] = None, bl_scene=None) -> int:
             print("detp_bake: cancelled: nothing written", file=sys.stderr, flush=True)
             return interrupt.EXIT_CODE
     output.written(summary, args.json)
-    return 0
+    return interrupt.EXIT_CODE if summary.get("cancelled") else 0

@@ -10,7 +10,7 @@ bottom row, as in Blender's `Image.pixels`. Files are written top row first (see
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
@@ -243,6 +243,19 @@ def rasterise(scene: Scene) -> TexelSet:
         raise BakeError("no object to bake")
     cat = [np.concatenate(x) for x in zip(*parts)]
     return TexelSet(*cat, lightmaps=lightmaps)
+
+
+def select(texels: TexelSet, mask: np.ndarray) -> TexelSet:
+    """The texels where `mask` is set, as a TexelSet of their own: every lightmap keeps its place
+    (with the count of its texels kept, maybe 0), so per-lightmap values still broadcast."""
+    mask = np.asarray(mask, bool)
+    lightmaps, offset = [], 0
+    for lm in texels.lightmaps:
+        count = int(mask[lm.texels].sum())
+        lightmaps.append(replace(lm, offset=offset, count=count))
+        offset += count
+    return TexelSet(texels.position[mask], texels.normal[mask], texels.triangle[mask], texels.pixel[mask],
+                    texels.area[mask], texels.centre_inside[mask], lightmaps)
 
 
 def to_image(values: np.ndarray, lm: Lightmap, pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

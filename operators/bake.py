@@ -129,7 +129,11 @@ class DETPBAKE_OT_bake(bpy.types.Operator):
         return common.idle(cls, context)
 
     def _prepare(self, context):
-        job = BakeJob(context)
+        if context.scene.detp_bake.use_frame_range:
+            from .bake_frames import FramesJob
+            job = FramesJob(context)
+        else:
+            job = BakeJob(context)
         try:
             job.prepare(context)
         except BakeError as exc:

@@ -36,7 +36,7 @@ def bake_settings(context, estimator=None) -> BakeSettings:
         memory_budget_mb=prefs.memory_budget if prefs is not None else 0,
         estimator_settings=EstimatorSettings(
             k=s.k, q=s.q, radius_texels=s.radius_texels,
-            radius=s.radius if s.radius_mode == "WORLD" else None))
+            radius=s.radius if s.radius_mode == "WORLD" else None, hybrid_moving=s.hybrid_moving))
 
 
 def output_directory(context) -> str:

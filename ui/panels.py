@@ -61,8 +61,31 @@ class DETPBAKE_PT_estimator(_Panel, bpy.types.Panel):
             return
         layout.prop(s, "radius_mode")
         layout.prop(s, "radius_texels" if s.radius_mode == "TEXELS" else "radius")
-        if s.estimator == "sphere_cache":
+        if s.estimator == "sphere_cache" or (s.estimator == "hybrid" and s.hybrid_moving == "sphere_cache"):
             layout.prop(s, "q")
+        if s.estimator == "hybrid":
+            layout.prop(s, "hybrid_moving")
+
+
+class DETPBAKE_PT_frames(_Panel, bpy.types.Panel):
+    bl_label = "Frame Range"
+    bl_parent_id = "DETPBAKE_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.detp_bake, "use_frame_range", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        s = context.scene.detp_bake
+        layout.active = s.use_frame_range
+        col = layout.column(align=True)
+        col.prop(s, "frame_start")
+        col.prop(s, "frame_end")
+        col.prop(s, "frame_step")
+        if s.use_frame_range and s.estimator != "hybrid":
+            layout.label(text="Hybrid indexes static objects once", icon="INFO")
 
 
 class DETPBAKE_PT_lightmaps(_Panel, bpy.types.Panel):
@@ -109,6 +132,8 @@ class DETPBAKE_PT_object(_Panel, bpy.types.Panel):
         layout.prop(o, "include")
         layout.prop(o, "resolution")
         layout.prop(o, "uv_layer")
+        if context.scene.detp_bake.use_frame_range:
+            layout.prop(o, "motion")
 
 
 class DETPBAKE_PT_compare(_Panel, bpy.types.Panel):
@@ -148,7 +173,7 @@ class DETPBAKE_PT_stats(_Panel, bpy.types.Panel):
                 col.label(text=f"{phase.capitalize()}: {r['seconds'][phase]:.2f} s")
 
 
-classes = (DETPBAKE_PT_main, DETPBAKE_PT_photons, DETPBAKE_PT_estimator, DETPBAKE_PT_lightmaps,
+classes = (DETPBAKE_PT_main, DETPBAKE_PT_photons, DETPBAKE_PT_estimator, DETPBAKE_PT_frames, DETPBAKE_PT_lightmaps,
            DETPBAKE_PT_object, DETPBAKE_PT_compare, DETPBAKE_PT_stats)
 
 

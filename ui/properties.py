@@ -7,6 +7,8 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, P
 ESTIMATORS = [
     ("disc_index", "DETP: Disc Index", "Tangent-disc density estimation with the discs indexed in a BVH (fastest)"),
     ("sphere_cache", "DETP: Sphere Cache", "Tangent-disc density estimation through Lastra's sphere cache"),
+    ("hybrid", "DETP: Hybrid", "For frame ranges: the static objects' discs indexed once for all frames, the "
+     "moving objects' texels by the sphere cache (or a disc index) every frame"),
     ("detp", "DETP: Brute Force", "Every segment against every disc: slow, the reference the others match"),
     ("photon_map", "Photon Map", "Jensen's k-nearest-neighbour photon map: noisy, darkens edges"),
 ]
@@ -73,6 +75,16 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
     compare_estimators: EnumProperty(name="Compare", options={"ENUM_FLAG"},
                                      default={"photon_map", "sphere_cache", "disc_index"},
                                      items=ESTIMATORS, description="Estimators shown side by side by Compare")
+    use_frame_range: BoolProperty(name="Frame Range", default=False,
+                                  description="Bake every frame of a range: <object>.<estimator>.<frame>.exr, the "
+                                              "same photons every frame so static regions do not flicker")
+    frame_start: IntProperty(name="Start", default=1, description="First frame to bake")
+    frame_end: IntProperty(name="End", default=24, description="Last frame to bake")
+    frame_step: IntProperty(name="Step", default=1, min=1, description="Bake every n-th frame of the range")
+    hybrid_moving: EnumProperty(name="Moving Texels", default="sphere_cache",
+                                items=[("sphere_cache", "Sphere Cache", "The paper's choice"),
+                                       ("disc_index", "Disc Index", "A small index of their own, built every frame")],
+                                description="Hybrid: how the moving objects' texels are estimated")
     last_report: StringProperty(name="Last Bake", default="", options={"HIDDEN"},
                                 description="Statistics of the last bake (JSON)")
 
@@ -83,6 +95,13 @@ class DETPBakeObjectSettings(bpy.types.PropertyGroup):
                             description="This object's lightmap size (0: use the scene setting)")
     uv_layer: StringProperty(name="Lightmap UV", default="Lightmap",
                              description="UV layer that holds this object's lightmap charts")
+    motion: EnumProperty(name="Motion", default="AUTO",
+                         items=[("AUTO", "Auto", "Moving when its evaluated geometry, placement or material "
+                                 "changes over the frame range"),
+                                ("STATIC", "Static", "Treat it as static over the frame range"),
+                                ("MOVING", "Moving", "Treat it as moving over the frame range")],
+                         description="Frame ranges: whether this object counts as moving (the hybrid estimator "
+                                     "indexes the static objects' discs once)")
 
 
 classes = (DETPBakeSettings, DETPBakeObjectSettings)

@@ -11,15 +11,18 @@ from ..errors import BakeError
 from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY, _has_nodes
 
 
-def load_image(path: str, name: str):
-    """Load (or reload) a baked EXR as a linear image datablock named `name`."""
+def load_image(path: str, name: str, sequence: bool = False):
+    """Load (or reload) a baked EXR as a linear image datablock named `name`; `sequence`: the
+    first file of a numbered image sequence (<object>.<estimator>.<frame:04d>.exr)."""
     img = bpy.data.images.get(name)
-    if img is not None and bpy.path.abspath(img.filepath) == path:
+    if img is not None and bpy.path.abspath(img.filepath) == path and (img.source == "SEQUENCE") == sequence:
         img.reload()
         return img
     img = bpy.data.images.load(path, check_existing=False)
     img.name = name
     img.colorspace_settings.is_data = False
+    if sequence:
+        img.source = "SEQUENCE"
     return img
 
 
@@ -34,9 +37,10 @@ def _base_colour_source(nt):
     return None, (0.8, 0.8, 0.8, 1.0)
 
 
-def _wire(mat, image, uv_name: str) -> None:
+def _wire(mat, image, uv_name: str, frames: Optional[tuple] = None) -> None:
     """Add the lightmap frame: UV Map → Image × base colour → Emission → an EEVEE output made
-    active, so the viewport shows the baked lighting while Cycles keeps the original shading."""
+    active, so the viewport shows the baked lighting while Cycles keeps the original shading.
+    `frames` (first, last): the image is a sequence whose file numbers are the scene's frames."""
     nt = mat.node_tree
     previous = [n.name for n in nt.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output]
     src, const = _base_colour_source(nt)
@@ -48,6 +52,15 @@ def _wire(mat, image, uv_name: str) -> None:
     tex = nt.nodes.new("ShaderNodeTexImage")
     tex.image = image
     tex.interpolation = "Linear"
+    if frames is not None:
+        # Blender shows file number (frame − frame_start + 1, held within the duration) + offset.
+        first, last = frames
+        user = tex.image_user
+        user.frame_duration = last - first + 1
+        user.frame_start = first
+        user.frame_offset = first - 1
+        user.use_cyclic = False
+        user.use_auto_refresh = True
     mix = nt.nodes.new("ShaderNodeMix")
     mix.data_type = "RGBA"
     mix.blend_type = "MULTIPLY"
@@ -93,7 +106,7 @@ def _use_nodes(mat) -> None:
         mat.use_nodes = True
 
 
-def apply_lightmap(obj, image, uv_name: str, shared: bool = False) -> None:
+def apply_lightmap(obj, image, uv_name: str, shared: bool = False, frames: Optional[tuple] = None) -> None:
     """Show `image` on `obj`'s materials. A material other baked objects also use is copied for
     this object (`shared`), and so is every material of a mesh other objects share (the copy goes
     in an object-level slot, so the other objects keep theirs); an empty slot gets a new material.
@@ -129,7 +142,7 @@ def apply_lightmap(obj, image, uv_name: str, shared: bool = False) -> None:
             mat = original
         record["slots"].append(entry)
         if mat.node_tree.nodes.get(FRAME_NAME) is None:
-            _wire(mat, image, uv_name)
+            _wire(mat, image, uv_name, frames)
     obj[REVERT_KEY] = json.dumps(record)
 
 
@@ -165,11 +178,13 @@ def revert(obj) -> bool:
 
 
 def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional[dict] = None,
-              copy_materials: bool = False) -> list:
+              copy_materials: bool = False, frames: Optional[tuple] = None) -> list:
     """Load each baked EXR and wire it into its object's materials; returns the objects.
     `uv_layer`: one name, {object name: name}, or None for DEFAULT_UV. `objects` maps a lightmap's
     object name to the object to apply it to (default: the scene's object of that name);
-    `copy_materials` gives each object its own material copies even when nobody shares them."""
+    `copy_materials` gives each object its own material copies even when nobody shares them.
+    `frames` (first, last): `files` are the first frame's of a range baked at every frame, shown as
+    image sequences that follow the timeline."""
     targets = {}
     for name in files:
         obj = (objects or {}).get(name) or bl_scene.objects.get(name)
@@ -186,8 +201,8 @@ def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional
             raise BakeError("applying lightmaps needs the EXR format in 'formats'")
         layer = uv_layer.get(name) if isinstance(uv_layer, dict) else uv_layer
         revert(obj)  # a new bake replaces the last one
-        image = load_image(exr[0], f"{obj.name}.{estimator}")
+        image = load_image(exr[0], f"{obj.name}.{estimator}", sequence=frames is not None)
         shared = copy_materials or any(len(users.get(s.material.name, ())) > 1
                                        for s in obj.material_slots if s.material)
-        apply_lightmap(obj, image, layer or DEFAULT_UV, shared)
+        apply_lightmap(obj, image, layer or DEFAULT_UV, shared, frames)
     return list(targets.values())

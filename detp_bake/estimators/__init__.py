@@ -33,6 +33,9 @@ class EstimatorSettings:
     radius: Optional[float] = None  # DETP family: disc radius in metres (overrides texels)
     q: float = 0.65  # sphere cache: ratio of successive sphere radii
     kernel: str = "constant"  # DETP family: constant or epanechnikov
+    # hybrid: the moving objects' texels by sphere_cache (the paper's choice) or by a disc index of
+    # their own, rebuilt every frame (measured faster here: benchmarks/frames.py)
+    hybrid_moving: str = "sphere_cache"
 
 
 RADIUS_TEXELS_INDIRECT = 3.0
@@ -46,6 +49,20 @@ class Context:
     expected_segments: int = 0  # an estimate made before tracing, for work limits
     clearance: Optional[np.ndarray] = None  # per texel, free distance in its tangent plane (DETP discs)
     rise: Optional[np.ndarray] = None  # per texel, its own surface's height in front of its disc (rise.py)
+    frames: Optional["FrameState"] = None  # set when baking a frame range (frames.py)
+
+
+@dataclass
+class FrameState:
+    """What a frame range shares between its frames: which baked objects move over the range, and
+    what estimators keep from one frame to the next (by estimator name), such as the hybrid's index
+    over the static objects' discs."""
+    moving: frozenset = frozenset()
+    keep: dict = field(default_factory=dict)
+    # Where the moving objects are: a box (lo, hi) per object and frame, (K, 2, 3); None: unknown.
+    # With the lights unchanged, direct light is re-sampled only near them (frame_direct.py).
+    moving_boxes: Optional[np.ndarray] = None
+    lights_change: bool = False
 
 
 @dataclass
@@ -109,4 +126,4 @@ def create(name: str, texels: TexelSet, settings: EstimatorSettings,
 
 
 def _load_all() -> None:
-    from . import detp, disc_index, photon_map, sphere_cache  # noqa: F401  (they register themselves)
+    from . import detp, disc_index, hybrid, photon_map, sphere_cache  # noqa: F401  (they register themselves)

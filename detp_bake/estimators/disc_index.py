@@ -285,6 +285,11 @@ class DiscIndex(Estimator):
         for k in self.QUERY_SECONDS:
             self.seconds[k] += sums[f"seconds_{k}"]
 
+    def reset(self) -> None:
+        """Forget the photons added so far and keep the index: the hybrid estimator splats every
+        frame of a range through one index over the static discs."""
+        self.take()
+
     def finish(self):
         t0 = time.perf_counter()
         out = np.empty_like(self.acc)
