@@ -53,19 +53,6 @@ def _write(oiio, path, spec, data) -> None:
         out.close()
 
 
-def read_image(path: str | os.PathLike) -> np.ndarray:
-    """(H, W, C) float32 with row 0 at the bottom."""
-    oiio = _oiio()
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise BakeError(f"cannot read image '{path}': {oiio.geterror()}")
-    try:
-        data = inp.read_image("float")
-    finally:
-        inp.close()
-    return np.ascontiguousarray(np.asarray(data, np.float32)[::-1])
-
-
 WRITERS = {"exr": write_exr, "png": write_png}
 
 
