@@ -86,9 +86,10 @@ class BakeSettings:
             bad("batch_size", self.batch_size, "must be positive")
         if not (np.isfinite(self.target_noise) and 0.0 <= self.target_noise <= 100.0):
             bad("target_noise", self.target_noise, "must be a percentage between 0 (off) and 100")
-        if self.target_noise and self.estimator == "photon_map":
-            bad("target_noise", self.target_noise, "the photon map's noise does not fall with more photons "
-                "(about 1/sqrt(k-1)): use a DETP estimator, or raise k")
+        fixed = estimators.get(self.estimator).fixed_noise(self.estimator_settings)
+        if self.target_noise and fixed is not None:
+            bad("target_noise", self.target_noise, f"the {self.estimator} estimator's noise does not fall with "
+                f"more photons (about {100 * fixed:.2g} % whatever the count): use a DETP estimator")
         if not (np.isfinite(self.time_limit) and self.time_limit >= 0.0):
             bad("time_limit", self.time_limit, "must be 0 (off) or a number of seconds")
         if self.memory_budget_mb < 0:
@@ -102,8 +103,8 @@ class BakeSettings:
             bad("radius_texels", es.radius_texels, "must be a positive, finite number of texels")
         if not 0.05 <= es.q <= 0.95:
             bad("q", es.q, "the sphere cache ratio must lie between 0.05 and 0.95")
-        if es.kernel not in ("constant", "epanechnikov"):
-            bad("kernel", es.kernel, "choose constant or epanechnikov")
+        if es.kernel not in estimators.KERNELS:
+            bad("kernel", es.kernel, f"choose {' or '.join(estimators.KERNELS)}")
 
 
 @dataclass
@@ -223,7 +224,7 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
     rasterise_seconds = time.perf_counter() - t0
     # DETP discs reach past a surface's edge by their radius and count what passes there: sun
     # photons must start that far beyond the footprint of the geometry too.
-    discs = any(name != "photon_map" for name in names)
+    discs = any(estimators.get(name).discs for name in names)
     radius = disc_radius(texels, settings.estimator_settings) if discs else None
     reach = float(np.max(radius)) if discs and len(texels) else 0.0
     caster = RayCaster(scene.positions)
@@ -321,9 +322,9 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
                          "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": batch_size}
         if name in noise:
             result.noise = noise[name].relative(texels.lightmaps, result.value * np.pi)
-        elif name == "photon_map":  # DESIGN.md §2: about 1/√(k − 1) whatever the photon count
-            k = settings.estimator_settings.k
-            result.noise = {lm.name: 1.0 / np.sqrt(k - 1) for lm in texels.lightmaps}
+        elif runs[name].fixed_noise(settings.estimator_settings) is not None:
+            fixed = runs[name].fixed_noise(settings.estimator_settings)
+            result.noise = {lm.name: fixed for lm in texels.lightmaps}
         results[name] = result
     return results
 
@@ -361,10 +362,8 @@ def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) ->
     """The bake's peak memory, estimated before any work; over the budget (the setting, else 80 %
     of what the system has free) it is a BakeError that says what to lower."""
     pixels = sum(o.resolution * o.resolution for o in scene.objects if o.bake)
-    from .estimators import REGISTRY, _load_all
-    _load_all()
-    per_texel = {n: REGISTRY[n].bytes_per_texel for n in names}
-    hits = int(settings.photons * per_photon_kept) if "photon_map" in names else 0
+    per_texel = {n: estimators.get(n).bytes_per_texel for n in names}
+    hits = int(settings.photons * per_photon_kept) if any(estimators.get(n).stores_hits for n in names) else 0
     geometry = scene.positions.nbytes + scene.normals.nbytes + scene.uvs.nbytes + 24 * scene.triangle_count
     need = memory.estimate(pixels, per_texel, batch, per_photon, per_photon_kept,
                            settings.threads or os.cpu_count() or 1, hits, geometry)

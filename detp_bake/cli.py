@@ -14,9 +14,12 @@ from pathlib import Path
 from dataclasses import replace
 from typing import Optional, Sequence
 
-from . import __version__, bake as bake_mod, images
+from . import __version__, bake as bake_mod, estimators, images
 from .errors import BakeCancelled, BakeError
-from .estimators import EstimatorSettings, names as estimator_names
+from .estimators import KERNELS, EstimatorSettings, compare_defaults, names as estimator_names
+
+# Every default and choice below comes from BakeSettings, EstimatorSettings and the estimator registry.
+_B, _E = bake_mod.BakeSettings, EstimatorSettings
 
 
 def build_parser(prog: str = "python -m detp_bake", with_scene_path: bool = True) -> argparse.ArgumentParser:
@@ -26,9 +29,9 @@ def build_parser(prog: str = "python -m detp_bake", with_scene_path: bool = True
     sub = parser.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bake", help="bake lightmaps for a .blend file")
     c = sub.add_parser("compare", help="bake the same photons with several estimators, side by side")
-    c.add_argument("--estimators", nargs="+", default=["photon_map", "sphere_cache", "disc_index"],
-                   help="estimators to compare; the first is the reference (default: photon_map sphere_cache "
-                        "disc_index)")
+    c.add_argument("--estimators", nargs="+", default=compare_defaults(), metavar="ESTIMATOR",
+                   help="estimators to compare; the first is the reference "
+                                             "(default: %s)" % " ".join(compare_defaults()))
     for p in (b, c):
         _bake_arguments(p, with_scene_path)
     return parser
@@ -38,38 +41,40 @@ def _bake_arguments(b, with_scene_path):
     if with_scene_path:
         b.add_argument("scene", help="the .blend file to bake")
     b.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake (default: all visible meshes)")
-    b.add_argument("--estimator", default="disc_index",
-                   help=f"one of: {', '.join(estimator_names())} (default disc_index)")
+    b.add_argument("--estimator", default=_B.estimator,
+                   help=f"one of: {', '.join(estimator_names())} (default %(default)s)")
     b.add_argument("--photons", type=int, default=None,
-                   help="photons to trace (default 1M; with --target-noise or --time-limit, the most to trace, "
-                        "default 1G)")
-    b.add_argument("--target-noise", type=float, default=0.0, metavar="PERCENT",
+                   help=f"photons to trace (default {bake_mod._si(_B.photons)}; with --target-noise or --time-limit, "
+                        f"the most to trace, default {bake_mod._si(bake_mod.MAX_PHOTONS)})")
+    b.add_argument("--target-noise", type=float, default=_B.target_noise, metavar="PERCENT",
                    help="trace photons in batches until every lightmap's relative noise is at most this")
-    b.add_argument("--time-limit", type=float, default=0.0, metavar="SECONDS",
+    b.add_argument("--time-limit", type=float, default=_B.time_limit, metavar="SECONDS",
                    help="stop tracing before the bake has run this long (the photons so far stand for all)")
-    b.add_argument("--direct", default="sampled", choices=bake_mod.DIRECT_MODES,
+    b.add_argument("--direct", default=_B.direct, choices=bake_mod.DIRECT_MODES,
                    help="sampled: direct light by shadow rays, photons carry indirect light only (default); "
                         "photons: the estimator sees every segment (the paper's experiments)")
-    b.add_argument("--direct-samples", type=int, default=bake_mod.BakeSettings.direct_samples,
+    b.add_argument("--direct-samples", type=int, default=_B.direct_samples,
                    help="shadow rays per texel for each light with extent (default %(default)s)")
-    b.add_argument("--k", type=int, default=100, help="photon map neighbours (default 100)")
-    b.add_argument("--radius-texels", type=float, default=None,
-                   help="DETP disc radius in texels (default 3 with --direct sampled, 1.5 with --direct photons)")
-    b.add_argument("--radius", type=float, default=None, help="DETP disc radius in metres (overrides texels)")
-    b.add_argument("--q", type=float, default=0.65, help="sphere cache radius ratio (default 0.65)")
-    b.add_argument("--kernel", default="constant", choices=("constant", "epanechnikov"))
-    b.add_argument("--resolution", type=int, default=128, help="lightmap size in pixels (default 128)")
-    b.add_argument("--margin", type=int, default=16, help="dilation margin in pixels (default 16)")
-    b.add_argument("--bounces", type=int, default=None,
+    b.add_argument("--k", type=int, default=_E.k, help="photon map neighbours (default %(default)s)")
+    b.add_argument("--radius-texels", type=float, default=_E.radius_texels,
+                   help=f"DETP disc radius in texels (default {estimators.RADIUS_TEXELS_INDIRECT:g} with --direct "
+                        f"sampled, {estimators.RADIUS_TEXELS_ALL:g} with --direct photons)")
+    b.add_argument("--radius", type=float, default=_E.radius, help="DETP disc radius in metres (overrides texels)")
+    b.add_argument("--q", type=float, default=_E.q, help="sphere cache radius ratio (default %(default)s)")
+    b.add_argument("--kernel", default=_E.kernel, choices=KERNELS)
+    b.add_argument("--resolution", type=int, default=_B.resolution, help="lightmap size in pixels (default %(default)s)")
+    b.add_argument("--margin", type=int, default=_B.margin, help="dilation margin in pixels (default %(default)s)")
+    b.add_argument("--bounces", type=int, default=_B.bounces,
                    help="diffuse bounces (default: the scene's Cycles Light Paths › Diffuse)")
-    b.add_argument("--seed", type=int, default=0)
-    b.add_argument("--threads", type=int, default=0, help="0 = all cores")
+    b.add_argument("--seed", type=int, default=_B.seed)
+    b.add_argument("--threads", type=int, default=_B.threads, help="0 = all cores")
     b.add_argument("--uv-layer", default=None,
                    help="lightmap UV layer (default 'Lightmap', created with Lightmap Pack if missing)")
     b.add_argument("--out", required=True, help="output folder")
-    b.add_argument("--format", default="exr", help="comma-separated: exr,png (default exr)")
+    b.add_argument("--format", default=",".join(_B.formats),
+                   help=f"comma-separated: {','.join(images.WRITERS)} (default %(default)s)")
     b.add_argument("--half", action="store_true", help="write half-float EXR")
-    b.add_argument("--denoise", action=argparse.BooleanOptionalAction, default=True,
+    b.add_argument("--denoise", action=argparse.BooleanOptionalAction, default=_B.denoise,
                    help="denoise the lightmaps with OIDN (default on; needs the pyoidn package)")
     b.add_argument("--keep-raw", action="store_true",
                    help="also write each lightmap before denoising, as <object>.<estimator>.raw.exr")

@@ -6,7 +6,7 @@ import numpy as np
 from bpy.props import EnumProperty
 from mathutils import Matrix
 
-from ..detp_bake import bake, blender, comparison, images
+from ..detp_bake import bake, blender, comparison, estimators, images
 from ..detp_bake.errors import BakeCancelled, BakeError
 from ..ui.properties import ESTIMATORS
 from . import common
@@ -106,7 +106,7 @@ class DETPBAKE_OT_compare(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     estimators: EnumProperty(name="Estimators", options={"ENUM_FLAG"}, items=ESTIMATORS,
-                             default={"photon_map", "sphere_cache", "disc_index"})
+                             default=set(estimators.compare_defaults()))
 
     @classmethod
     def poll(cls, context):
@@ -117,10 +117,7 @@ class DETPBAKE_OT_compare(bpy.types.Operator):
         return self.execute(context)
 
     def execute(self, context):
-        order = [e[0] for e in ESTIMATORS]
-        chosen = set(self.estimators)
-        names = [n for n in ("photon_map", *order) if n in chosen]
-        names = list(dict.fromkeys(names))
+        names = estimators.compare_order(self.estimators)
         if len(names) < 1:
             self.report({"ERROR"}, "choose at least one estimator to compare")
             return {"CANCELLED"}
