@@ -12,6 +12,7 @@ import json
 import os
 import time
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -134,7 +135,7 @@ class BakeResult:
     export: dict = field(default_factory=dict)  # what the exporter found (instances, triangles, textures, …)
     raw_images: dict = field(default_factory=dict)  # object name -> image before denoising (when denoised)
     warnings: list = field(default_factory=list)
-    stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit
+    stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit, user (Stop and keep)
     share: float = 1.0  # the share of the photons traced (less than 1 when stopped early)
 
     def report(self) -> dict:
@@ -168,6 +169,28 @@ class BakeResult:
         }
 
 
+@dataclass
+class Partial:
+    """The bake so far, after a batch, for a live preview: `read()` returns the primary
+    estimator's current estimate of the whole bake, E/π per texel (N, 3), direct light included
+    (the sums so far over the share traced, as an early stop would keep them)."""
+    estimator: str
+    photons: int
+    share: float
+    noise: Optional[float]  # the worst lightmap's relative noise so far, when measured
+    texels: texels_mod.TexelSet
+    read: Callable[[], np.ndarray]
+
+
+def preview_images(texels: texels_mod.TexelSet, value: np.ndarray, margin: int) -> dict:
+    """{object name: (H, W, 3) float32 image, dilated, row 0 at the bottom} of per-texel values."""
+    out = {}
+    for lm in texels.lightmaps:
+        img, mask = texels_mod.to_image(value[lm.texels], lm, texels.pixel[lm.texels])
+        out[lm.name] = texels_mod.dilate(img, mask, margin).astype(np.float32, copy=False)
+    return out
+
+
 def _cancel_fn(cancel) -> Callable[[], bool]:
     if cancel is None:
         return lambda: False
@@ -183,21 +206,23 @@ def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[P
 
 
 def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional[Callable[[Progress], None]] = None,
-                 cancel=None) -> dict:
+                 cancel=None, stop=None, preview: Optional[Callable[[Partial], None]] = None) -> dict:
     """Like `compute`, for several estimators fed the very same photons: every batch goes to each
     of them as it is traced. Returns {estimator name: BakeResult}. `settings.threads` (0: all
-    cores) holds for tracing, shadow rays and the compiled estimators alike."""
+    cores) holds for tracing, shadow rays and the compiled estimators alike. `stop()` true ends
+    tracing after the batch, keeping what there is as a finished bake (stopped_by "user");
+    `preview` sees the bake after every batch (Partial)."""
     import numba
     before = numba.get_num_threads()
     if settings.threads:
         numba.set_num_threads(max(1, min(int(settings.threads), numba.config.NUMBA_NUM_THREADS)))
     try:
-        return _compute_many(scene, settings, names, progress, cancel)
+        return _compute_many(scene, settings, names, progress, cancel, stop, preview)
     finally:
         numba.set_num_threads(before)
 
 
-def _compute_many(scene, settings, names, progress, cancel) -> dict:
+def _compute_many(scene, settings, names, progress, cancel, stop=None, preview=None) -> dict:
     names = list(dict.fromkeys(names))
     if settings.estimator_settings.radius_texels is None:
         texels_wide = estimators.RADIUS_TEXELS_INDIRECT if settings.direct == "sampled" else estimators.RADIUS_TEXELS_ALL
@@ -290,6 +315,12 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
         report(Progress("trace", done / total, message))
         if cancelled():
             raise BakeCancelled()
+        if preview is not None and runs[primary].streaming:
+            preview(Partial(primary, done, tracer.share, max(current.values(), default=None), texels,
+                            partial(_partial_value, runs[primary], direct_e, tracer.share)))
+        if stop is not None and stop():
+            stopped_by = "user"
+            break
         elapsed = time.perf_counter() - t_start
         if settings.time_limit and elapsed + (time.perf_counter() - t_batch) > settings.time_limit:
             stopped_by = "time_limit"
@@ -327,6 +358,11 @@ def _compute_many(scene, settings, names, progress, cancel) -> dict:
             result.noise = {lm.name: fixed for lm in texels.lightmaps}
         results[name] = result
     return results
+
+
+def _partial_value(est, direct_e, share) -> np.ndarray:
+    irradiance = est.finish().irradiance / share
+    return (irradiance if direct_e is None else irradiance + direct_e) / np.pi
 
 
 def _finish(settings, bounces, texels, est, tracer, seconds, direct_e=None, direct_info=None) -> BakeResult:

@@ -59,3 +59,35 @@ def _label(strip: np.ndarray, text: str) -> np.ndarray:
     buf = oiio.ImageBuf(oiio.ImageSpec(w, h, 3, "float"))
     oiio.ImageBufAlgo.render_text(buf, 4, h - 6, text, 14, "", (1.0, 1.0, 1.0))
     return np.asarray(buf.get_pixels(oiio.FLOAT), np.float32).reshape(h, w, 3)
+
+
+def write_report(results: dict, names: list, out_dir) -> dict:
+    """One report for a comparison, what every front end writes: compare.png (the grid) and
+    compare.json, with the shared photons once and a section per estimator (its settings,
+    counters, noise, seconds and files, as its own report.json has them, plus its difference to
+    the reference, the first of `names`). Returns the summary, with the paths written."""
+    import json
+    import os
+    from pathlib import Path
+
+    from . import images
+    out = Path(out_dir)
+    first = results[names[0]]
+    seconds = {n: results[n].seconds["estimate"] for n in names}
+    picture, diffs = comparison_image({n: results[n].images for n in names}, first.masks, seconds)
+    png = out / "compare.png"
+    images.write_png(png, picture)
+    sections = {}
+    for name in names:
+        section = results[name].report()
+        section["difference_to_reference"] = diffs[name]
+        sections[name] = section
+    summary = {"estimators": list(names), "reference": names[0], "photons": first.stats.photons,
+               "trace_seconds": first.seconds["trace"], "seconds": seconds, "difference_to_first": diffs,
+               "files": {n: results[n].files for n in names}, "image": str(png), "sections": sections}
+    path = out / "compare.json"
+    tmp = out / ".compare.partial.json"
+    tmp.write_text(json.dumps(summary, indent=2))
+    os.replace(tmp, path)
+    summary["report"] = str(path)
+    return summary
