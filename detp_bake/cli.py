@@ -7,14 +7,13 @@ runs before tracing starts; progress goes to stderr, the report path to stdout.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 from dataclasses import replace
 from typing import Optional, Sequence
 
-from . import __version__, bake as bake_mod, estimators, images
+from . import __version__, bake as bake_mod, estimators, images, job as job_mod
 from .errors import BakeCancelled, BakeError
 from .estimators import KERNELS, EstimatorSettings, compare_defaults, names as estimator_names
 
@@ -144,27 +143,41 @@ def _open_scene(args, settings, bl_scene):
     return blender, bl_scene, scene, out_dir, time.perf_counter() - t0
 
 
+def _run_job(job: job_mod.Job) -> job_mod.Result:
+    """Run a job to its end, its progress and warnings on stderr; Ctrl-C cancels it."""
+    progress = StderrProgress()
+    events = job.events()
+    try:
+        for event in events:
+            if isinstance(event, job_mod.Progress):
+                progress(event)
+            elif isinstance(event, job_mod.Warning):
+                _log(f"warning: {event.message}")
+            elif isinstance(event, job_mod.Error):
+                raise BakeError(event.message)
+            elif isinstance(event, job_mod.Cancelled):
+                raise BakeCancelled()
+            elif isinstance(event, job_mod.Result):
+                return event
+    except KeyboardInterrupt:
+        job.cancel()
+        for _ in events:  # the worker stops within a batch and removes what it staged
+            pass
+        raise BakeCancelled() from None
+    raise BakeError("the job ended without a result")
+
+
 def run_compare(args, bl_scene=None) -> int:
     """The same photons through several estimators: their lightmaps, compare.png, compare.json."""
     settings = settings_from_args(args)
     for name in args.estimators:
         replace(settings, estimator=name).validate()
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
-    from . import comparison
-    results = bake_mod.compute_many(scene, settings, args.estimators, StderrProgress())
-    for result in results.values():
-        result.seconds["export"] = export_seconds
-        bake_mod.write(result, out_dir)
-    first = results[args.estimators[0]]
-    seconds = {n: r.seconds["estimate"] for n, r in results.items()}
-    picture, diffs = comparison.comparison_image({n: r.images for n, r in results.items()}, first.masks, seconds)
-    images.write_png(out_dir / "compare.png", picture)
-    summary = {"estimators": args.estimators, "seconds": seconds, "difference_to_first": diffs,
-               "trace_seconds": first.seconds["trace"], "photons": first.stats.photons,
-               "files": {n: r.files for n, r in results.items()}}
-    (out_dir / "compare.json").write_text(json.dumps(summary, indent=2))
-    for name in args.estimators:
-        _log(f"{name}: estimate {seconds[name]:.2f} s, difference to {args.estimators[0]} {100 * diffs[name]:.1f} %")
+    done = _run_job(job_mod.Job(scene, settings, out_dir, args.estimators, export_seconds=export_seconds))
+    summary = done.comparison
+    for name in summary["estimators"]:
+        _log(f"{name}: estimate {summary['seconds'][name]:.2f} s, difference to {summary['reference']} "
+             f"{100 * summary['difference_to_first'][name]:.1f} %")
     print(out_dir / "compare.png")
     print(out_dir / "compare.json")
     return 0
@@ -183,7 +196,7 @@ def run_bake(args, bl_scene=None) -> int:
     """Bake with parsed `args`; `bl_scene` is the open Blender scene (None: open args.scene)."""
     settings = settings_from_args(args)
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene)
-    result = bake_mod.bake(scene, settings, out_dir, StderrProgress(), export_seconds=export_seconds)
+    result = _run_job(job_mod.Job(scene, settings, out_dir, export_seconds=export_seconds)).results[settings.estimator]
     _log_noise(result)
     if args.apply:
         blender.apply_all(bl_scene, result.files, args.uv_layer, settings.estimator)
