@@ -105,10 +105,39 @@ def running() -> Optional["Job"]:
 
 
 def busy_message() -> Optional[str]:
+    """Why a new job cannot start now, or None (also while the warm-up runs: a job waits for it)."""
     job = _running
-    if job is None:
+    if job is None or isinstance(job, _Holder):
         return None
     return f"a {job.kind} is running: wait for it or press Esc"
+
+
+class _Holder:
+    """The lock held by something that is not a job: the kernels' warm-up (warmup.py)."""
+
+    def __init__(self, kind: str):
+        self.kind = kind
+
+
+def hold(kind: str) -> Optional[_Holder]:
+    """Take the lock for work that is not a job, if free; None when a job holds it."""
+    global _running
+    if not _lock.acquire(blocking=False):
+        return None
+    _running = _Holder(kind)
+    return _running
+
+
+def release(holder: _Holder) -> None:
+    global _running
+    if _running is holder:
+        _running = None
+        _lock.release()
+
+
+def warming() -> bool:
+    """The warm-up holds the lock: a job started now waits for it."""
+    return isinstance(_running, _Holder)
 
 
 @dataclass
@@ -150,10 +179,13 @@ class Job:
 
     # The front end's side -------------------------------------------------------------------
     def start(self) -> "Job":
-        """Take the session's lock and run on a worker thread. Raises JobBusy."""
+        """Take the session's lock (after the warm-up, if it runs) and run on a worker thread.
+        Raises JobBusy when another job runs."""
         global _running
         if not _lock.acquire(blocking=False):
-            raise JobBusy(busy_message() or "another job is running")
+            if not warming():
+                raise JobBusy(busy_message() or "another job is running")
+            _lock.acquire()
         _running = self
         self.thread = threading.Thread(target=self._work, name=f"detp_bake {self.kind}", daemon=True)
         self.thread.start()

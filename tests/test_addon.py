@@ -154,30 +154,34 @@ def test_bake_operator_refuses_bad_settings_before_work(addon, cornell, bpy, tmp
 def test_cancel_at_each_phase_leaves_the_scene_unchanged(addon, empty_blend, bpy, tmp_path, phase):
     """The worker thread path of the modal operator, cancelled in each phase. The scene has no
     Lightmap UV layer, so the export creates one that a cancel must remove again."""
+    from detp_bake.job import Cancelled, Preview
     from detp_bake_addon.operators.bake import BakeJob
     plane_object(bpy, "Floor", 2.0, (0, 0, 0))
     bpy.ops.object.light_add(type="SUN", location=(0, 0, 3))
     bpy.ops.object.select_all(action="DESELECT")
-    _small(empty_blend, tmp_path / "out", estimator="sphere_cache")
+    _small(empty_blend, tmp_path / "out", estimator="sphere_cache", live_preview_interval=0.1)
     before = scene_snapshot(bpy)
     job = BakeJob(bpy.context)
     job.prepare(bpy.context)
     assert job.created_uv == [("Floor", "Lightmap")]
+    core = job.job
     if phase == "export":
-        job.cancel.set()
+        core.cancel()
     else:
-        hook = job._on_progress
+        hook = core._progress
 
-        def cancel_in_phase(p):
+        def cancel_in_phase(p):  # on the worker, so the cancel lands in that very phase
             hook(p)
             if p.phase == phase:
-                job.cancel.set()
-        job._on_progress = cancel_in_phase
-    job.start()
-    job.thread.join(timeout=60)
-    assert job.done and job.cancelled
+                core.cancel()
+        core._progress = cancel_in_phase
+    core.start()
+    while not job.handle(core.poll()):  # the modal operator's timer, without the timer
+        core.thread.join(timeout=0.05)
+    assert isinstance(job.outcome, Cancelled)
+    assert job.outcome.phase == phase or phase == "export"
     reports = []
-    assert job.finish(bpy.context, lambda kind, msg: reports.append(msg)) == {"CANCELLED"}
+    assert job.finish(lambda kind, msg: reports.append(msg)) == {"CANCELLED"}
     assert any("cancelled" in m for m in reports)
     assert scene_snapshot(bpy) == before
     assert not [p for p in (tmp_path / "out").iterdir() if p.suffix in (".exr", ".json")]
@@ -298,11 +302,22 @@ def test_an_instance_selected_says_how_to_bake_it_and_hidden_meshes_that_render_
 
 
 def test_compare_and_bake_are_greyed_out_while_a_bake_runs(addon, cornell, bpy):
-    """Two bakes at once would share numba's thread pool: while one runs, neither operator polls."""
-    from detp_bake_addon.operators.bake import DETPBAKE_OT_bake
+    """Two bakes at once would share numba's thread pool: while a job runs (the core's lock), or
+    waits for its finish on the main thread, neither operator polls."""
+    from detp_bake import job as job_mod
+    from detp_bake_addon.operators import common
     assert bpy.ops.detp_bake.compare.poll() and bpy.ops.detp_bake.bake.poll()
-    DETPBAKE_OT_bake._running = True
+    holder = job_mod.hold("bake")
     try:
+        job_mod._running = type("Running", (), {"kind": "bake"})()  # a job, as the lock sees it
         assert not bpy.ops.detp_bake.compare.poll() and not bpy.ops.detp_bake.bake.poll()
+        assert "bake is running" in job_mod.busy_message()
     finally:
-        DETPBAKE_OT_bake._running = False
+        job_mod._running = holder
+        job_mod.release(holder)
+    assert bpy.ops.detp_bake.bake.poll()
+    common.ACTIVE = type("Finishing", (), {"kind": "compare"})()
+    try:
+        assert not bpy.ops.detp_bake.bake.poll()
+    finally:
+        common.ACTIVE = None

@@ -66,6 +66,12 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
                           items=[("EXR", "EXR", "32-bit float OpenEXR (the data)"),
                                  ("PNG", "PNG", "8-bit sRGB preview")],
                           description="Files written per object")
+    live_preview: BoolProperty(name="Live Preview", default=True,
+                               description="Show the lightmaps refining on the objects while the bake runs "
+                                           "(DETP estimators; Esc restores the materials)")
+    live_preview_interval: FloatProperty(name="Preview Every", default=1.0, min=0.1, soft_max=10.0,
+                                         subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE",
+                                         description="Seconds between live preview updates")
     apply_after_bake: BoolProperty(name="Apply After Bake", default=True,
                                    description="Show the lightmaps on the objects' materials when the bake ends")
     threads: IntProperty(name="Threads", default=_B.threads, min=0, max=1024,

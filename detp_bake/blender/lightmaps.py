@@ -164,6 +164,12 @@ def revert(obj) -> bool:
     return True
 
 
+def shared_materials(obj, objects) -> set:
+    """Names of `obj`'s materials that another of `objects` also uses (those get copies)."""
+    others = {s.material.name for o in objects if o is not obj for s in o.material_slots if s.material}
+    return {s.material.name for s in obj.material_slots if s.material and s.material.name in others}
+
+
 def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional[dict] = None,
               copy_materials: bool = False) -> list:
     """Load each baked EXR and wire it into its object's materials; returns the objects.
@@ -175,11 +181,6 @@ def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional
         obj = (objects or {}).get(name) or bl_scene.objects.get(name)
         if obj is not None:
             targets[name] = obj
-    users: dict = {}
-    for obj in targets.values():
-        for slot in obj.material_slots:
-            if slot.material is not None:
-                users.setdefault(slot.material.name, set()).add(obj.name)
     for name, obj in targets.items():
         exr = [p for p in files[name] if p.endswith(".exr")]
         if not exr:
@@ -187,7 +188,6 @@ def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional
         layer = uv_layer.get(name) if isinstance(uv_layer, dict) else uv_layer
         revert(obj)  # a new bake replaces the last one
         image = load_image(exr[0], f"{obj.name}.{estimator}")
-        shared = copy_materials or any(len(users.get(s.material.name, ())) > 1
-                                       for s in obj.material_slots if s.material)
+        shared = copy_materials or bool(shared_materials(obj, list(targets.values())))
         apply_lightmap(obj, image, layer or DEFAULT_UV, shared)
     return list(targets.values())
