@@ -241,6 +241,8 @@ class Job:
         self._events.put(event)
 
     def _progress(self, p: bake_mod.Progress) -> None:
+        if self._cancel.is_set():  # every report is a cancel point: it ends the phase that ran
+            raise BakeCancelled()
         if p.phase != self.phase:
             self.phase = p.phase
             self._send(Phase(p.phase))

@@ -321,3 +321,55 @@ def test_compare_and_bake_are_greyed_out_while_a_bake_runs(addon, cornell, bpy):
         assert not bpy.ops.detp_bake.bake.poll()
     finally:
         common.ACTIVE = None
+
+
+def _preview_pixels(bpy, name):
+    img = bpy.data.images[f"detp_bake preview {name}"]
+    px = np.empty(len(img.pixels), np.float32)
+    img.pixels.foreach_get(px)
+    return px
+
+
+def test_live_preview_refines_the_materials_images_and_esc_restores_the_scene(addon, cornell, bpy, tmp_path):
+    """A background-mode job through the operator's job: after each batch the Floor's material
+    shows the preview image, which changes; Stop and Keep ends it as a finished bake with the
+    photons traced; a cancelled job puts every material back."""
+    from detp_bake import job as job_mod
+    from detp_bake.images import file_stem  # noqa: F401  (the core the add-on uses)
+    from detp_bake_addon.operators.bake import BakeJob
+    _small(cornell, tmp_path / "a", photons=500_000, live_preview_interval=0.1)
+    before = scene_snapshot(bpy)
+
+    traced = []  # photons of each preview
+
+    def run(stop_after=None, cancel_after=None):
+        job = BakeJob(bpy.context, preview=1e-9)
+        job.prepare(bpy.context)
+        seen, traced[:] = [], []
+        for event in job.job.events():
+            job.handle([event])
+            if isinstance(event, job_mod.Preview):
+                mat = cornell.objects["Floor"].material_slots[0].material
+                tex = [n for n in mat.node_tree.nodes if n.type == "TEX_IMAGE" and n.parent is not None]
+                assert tex and tex[0].image.name == "detp_bake preview Floor"
+                seen.append(_preview_pixels(bpy, "Floor"))
+                traced.append(event.photons)
+                if len(seen) == stop_after:
+                    job.job.stop()
+                if len(seen) == cancel_after:
+                    job.job.cancel()
+        return job, seen, job.finish(lambda kind, msg: None)
+
+    job, seen, status = run(cancel_after=2)
+    assert status == {"CANCELLED"} and len(seen) == 2 and not np.array_equal(seen[0], seen[1])
+    assert scene_snapshot(bpy) == before  # Esc: the preview's materials and images are gone
+
+    job, seen, status = run(stop_after=1)
+    assert status == {"FINISHED"}
+    report = json.loads((tmp_path / "a" / "report.json").read_text())
+    # The worker may trace one more batch before the stop reaches it: the count is what it traced.
+    assert report["photons"] == traced[-1] < 500_000 and report["stopped_by"] == "user"
+    assert len(report["objects"]) == 7 and all(o["files"] for o in report["objects"])
+    assert json.loads(cornell.detp_bake.last_report)["photons"] == traced[-1]
+    assert "detp_bake preview Floor" not in bpy.data.images  # the applied lightmap replaced it
+    assert bpy.ops.detp_bake.revert() == {"FINISHED"}

@@ -155,8 +155,12 @@ def revert(obj) -> bool:
             mat = bpy.data.materials.get(original)
             if mat is not None and mat.node_tree:
                 _unwire(mat)
-    for _ in range(record.get("added_slots", 0)):
-        obj.data.materials.pop()
+    added = record.get("added_slots", 0)
+    if added and added == len(obj.data.materials):
+        obj.data.materials.clear()  # pop() leaves the object's slot count behind (Blender 4.5, 5.2)
+    else:
+        for _ in range(added):
+            obj.data.materials.pop()
     del obj[REVERT_KEY]
     img = bpy.data.images.get(record.get("image", ""))
     if img is not None and img.users == 0:
