@@ -46,6 +46,7 @@ def unregister():
     running = job.running()
     if running is not None and hasattr(running, "cancel"):
         running.cancel()
+    warmup.stop()
     warmup.wait()
     for module in reversed(_modules):
         module.unregister()

@@ -16,9 +16,11 @@ from typing import Optional
 
 import numpy as np
 
+from .errors import BakeCancelled
 from .scene import AreaLight, BakeObject, PointLight, Scene, SpotLight, SunLight
 
 _thread: Optional[threading.Thread] = None
+_cancel = threading.Event()
 seconds: Optional[float] = None  # how long the last warm-up took
 
 
@@ -57,7 +59,7 @@ def _box() -> Scene:
                  world=np.full(3, 0.1), default_bounces=2)
 
 
-def warm_up(threads: int = 0) -> float:
+def warm_up(threads: int = 0, cancel=None) -> float:
     """Bake the tiny box with every estimator, both ways of finding direct light; returns seconds.
     The caller holds the job lock (or knows nothing else runs numba)."""
     from . import bake, estimators
@@ -65,7 +67,7 @@ def warm_up(threads: int = 0) -> float:
     for direct in bake.DIRECT_MODES:
         settings = bake.BakeSettings(photons=4000, resolution=8, direct=direct, direct_samples=2, denoise=False,
                                      threads=threads, batch_size=1000)
-        bake.compute_many(_box(), settings, estimators.names())
+        bake.compute_many(_box(), settings, estimators.names(), cancel=cancel)
     return time.perf_counter() - t0
 
 
@@ -76,11 +78,14 @@ def start(threads: int = 0) -> Optional[threading.Thread]:
     holder = job.hold("warm-up")
     if holder is None:
         return None
+    _cancel.clear()
 
     def work():
         global seconds
         try:
-            seconds = warm_up(threads)
+            seconds = warm_up(threads, _cancel)
+        except BakeCancelled:
+            pass
         except Exception:  # a warm-up that fails costs the first bake its compile time, nothing more
             import traceback
             traceback.print_exc()
@@ -99,3 +104,8 @@ def running() -> bool:
 def wait(timeout: Optional[float] = None) -> None:
     if _thread is not None:
         _thread.join(timeout)
+
+
+def stop() -> None:
+    """End the warm-up at its next cancel point (the kernel compiling now still finishes)."""
+    _cancel.set()

@@ -140,3 +140,18 @@ def test_the_preview_refines_and_the_final_lightmaps_are_those_of_a_bake_without
         assert np.array_equal(final.images[name], plain.images[name])
     # The last preview is the finished bake before denoising.
     assert np.allclose(last, plain.images["Floor"], rtol=1e-5, atol=1e-7)
+
+
+def test_a_job_started_during_the_warm_up_waits_for_it_and_then_runs(tmp_path):
+    """The warm-up (every kernel compiled on a tiny scene) holds the lock without refusing jobs:
+    a bake clicked meanwhile starts once it is done; a second warm-up does not start."""
+    from detp_bake import warmup
+    assert warmup.start() is not None
+    try:
+        assert job_mod.warming() and job_mod.busy_message() is None  # the buttons stay live
+        assert warmup.start() is None
+        result = job_mod.Job(_scene(), _settings(), tmp_path).run()
+    finally:
+        warmup.wait()
+    assert not warmup.running() and warmup.seconds > 0.0
+    assert isinstance(result, job_mod.Result) and job_mod.running() is None
