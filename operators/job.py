@@ -7,6 +7,7 @@ and applies the result, or removes the UV layers the export created. Both use th
 exported, whatever scene is current by then.
 """
 import time
+from dataclasses import replace
 
 import bpy
 
@@ -45,7 +46,6 @@ class BlenderJob:
         if busy:
             raise job_mod.JobBusy(busy)
         for name in self.names or [self.settings.estimator]:
-            from dataclasses import replace
             replace(self.settings, estimator=name).validate()
         if not self.objects:
             raise BakeError(f"nothing to {self.kind}: no visible mesh with 'Include' set in the scene")
