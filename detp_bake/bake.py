@@ -318,7 +318,7 @@ def _compute_many(scene, settings, names, progress, cancel, stop=None, preview=N
         if preview is not None and runs[primary].streaming:
             preview(Partial(primary, done, tracer.share, max(current.values(), default=None), texels,
                             partial(_partial_value, runs[primary], direct_e, tracer.share)))
-        if stop is not None and stop():
+        if stop is not None and tracer.share < 1.0 and stop():
             stopped_by = "user"
             break
         elapsed = time.perf_counter() - t_start
