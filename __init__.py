@@ -54,8 +54,18 @@ _modules = (ui.properties, ui.preferences, operators, ui.panels, cli_command)
 def register():
     for module in _modules:
         module.register()
+    if not bpy.app.background:  # interactive: compile the kernels now, not at the first click
+        from .detp_bake import warmup
+        warmup.start()
 
 
 def unregister():
+    from .detp_bake import job, warmup
+    running = job.running()
+    if running is not None and hasattr(running, "cancel"):
+        running.cancel()
+    warmup.stop()
+    warmup.wait()
     for module in reversed(_modules):
         module.unregister()
+    job.release_memory()

@@ -13,6 +13,7 @@ import json
 import os
 import time
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -88,9 +89,10 @@ class BakeSettings:
             bad("batch_size", self.batch_size, "must be positive")
         if not (np.isfinite(self.target_noise) and 0.0 <= self.target_noise <= 100.0):
             bad("target_noise", self.target_noise, "must be a percentage between 0 (off) and 100")
-        if self.target_noise and self.estimator == "photon_map":
-            bad("target_noise", self.target_noise, "the photon map's noise does not fall with more photons "
-                "(about 1/sqrt(k-1)): use a DETP estimator, or raise k")
+        fixed = estimators.get(self.estimator).fixed_noise(self.estimator_settings)
+        if self.target_noise and fixed is not None:
+            bad("target_noise", self.target_noise, f"the {self.estimator} estimator's noise does not fall with "
+                f"more photons (about {100 * fixed:.2g} % whatever the count): use a DETP estimator")
         if not (np.isfinite(self.time_limit) and self.time_limit >= 0.0):
             bad("time_limit", self.time_limit, "must be 0 (off) or a number of seconds")
         if self.memory_budget_mb < 0:
@@ -104,8 +106,8 @@ class BakeSettings:
             bad("radius_texels", es.radius_texels, "must be a positive, finite number of texels")
         if not 0.05 <= es.q <= 0.95:
             bad("q", es.q, "the sphere cache ratio must lie between 0.05 and 0.95")
-        if es.kernel not in ("constant", "epanechnikov"):
-            bad("kernel", es.kernel, "choose constant or epanechnikov")
+        if es.kernel not in estimators.KERNELS:
+            bad("kernel", es.kernel, f"choose {' or '.join(estimators.KERNELS)}")
 
 
 @dataclass
@@ -136,7 +138,7 @@ class BakeResult:
     raw_images: dict = field(default_factory=dict)  # object name -> image before denoising (when denoised)
     cluster: dict = field(default_factory=dict)  # where the photons were traced when not here (distributed.py)
     warnings: list = field(default_factory=list)
-    stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit
+    stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit, user (Stop and keep)
     share: float = 1.0  # the share of the photons traced (less than 1 when stopped early)
 
     def report(self) -> dict:
@@ -171,6 +173,28 @@ class BakeResult:
         }
 
 
+@dataclass
+class Snapshot:
+    """The bake so far, after a block of batches, for a live preview: `read()` returns the primary
+    estimator's current estimate of the whole bake, E/π per texel (N, 3), direct light included
+    (the sums so far over the share traced, as an early stop would keep them)."""
+    estimator: str
+    photons: int
+    share: float
+    noise: Optional[float]  # the worst lightmap's relative noise so far, when measured
+    texels: texels_mod.TexelSet
+    read: Callable[[], np.ndarray]
+
+
+def preview_images(texels: texels_mod.TexelSet, value: np.ndarray, margin: int) -> dict:
+    """{object name: (H, W, 3) float32 image, dilated, row 0 at the bottom} of per-texel values."""
+    out = {}
+    for lm in texels.lightmaps:
+        img, mask = texels_mod.to_image(value[lm.texels], lm, texels.pixel[lm.texels])
+        out[lm.name] = texels_mod.dilate(img, mask, margin).astype(np.float32, copy=False)
+    return out
+
+
 def _cancel_fn(cancel) -> Callable[[], bool]:
     if cancel is None:
         return lambda: False
@@ -189,21 +213,25 @@ def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[P
 
 
 def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional[Callable[[Progress], None]] = None,
-                 cancel=None, cluster=None, frame_state: Optional[estimators.FrameState] = None) -> dict:
+                 cancel=None, cluster=None, frame_state: Optional[estimators.FrameState] = None, stop=None,
+                 preview: Optional[Callable[[Snapshot], None]] = None) -> dict:
     """Like `compute`, for several estimators fed the very same photons: every batch goes to each
     of them as it is traced. Returns {estimator name: BakeResult}. `settings.threads` (0: all
-    cores) holds for tracing, shadow rays and the compiled estimators alike."""
+    cores) holds for tracing, shadow rays and the compiled estimators alike. `stop()` true ends
+    tracing after the batch, keeping what there is as a finished bake (stopped_by "user");
+    `preview` sees the bake after every block of batches (Snapshot)."""
     import numba
     before = numba.get_num_threads()
     if settings.threads:
         numba.set_num_threads(max(1, min(int(settings.threads), numba.config.NUMBA_NUM_THREADS)))
     try:
-        return _compute_many(scene, settings, names, progress, cancel, cluster, frame_state)
+        return _compute_many(scene, settings, names, progress, cancel, cluster, frame_state, stop, preview)
     finally:
         numba.set_num_threads(before)
 
 
-def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_state=None) -> dict:
+def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_state=None, stop=None,
+                  preview=None) -> dict:
     names = list(dict.fromkeys(names))
     if settings.estimator_settings.radius_texels is None:
         texels_wide = estimators.RADIUS_TEXELS_INDIRECT if settings.direct == "sampled" else estimators.RADIUS_TEXELS_ALL
@@ -231,7 +259,7 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     rasterise_seconds = time.perf_counter() - t0
     # DETP discs reach past a surface's edge by their radius and count what passes there: sun
     # photons must start that far beyond the footprint of the geometry too.
-    discs = any(name != "photon_map" for name in names)
+    discs = any(estimators.get(name).discs for name in names)
     radius = disc_radius(texels, settings.estimator_settings) if discs else None
     reach = float(np.max(radius)) if discs and len(texels) else 0.0
     caster = RayCaster(scene.positions)
@@ -295,12 +323,7 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     if cluster is None:
         def over_time(batch_seconds):  # the next batch would take about as long as the last
             return bool(settings.time_limit) and time.perf_counter() - t_start + batch_seconds > settings.time_limit
-        traced = [0]
-
-        def on_batch(batch):
-            traced[0] += batch.photons
-            trace_progress(traced[0])
-        partials = (trace_batches(tracer, runs, block, cancelled, over_time, on_batch) for block in blocks)
+        partials = (trace_batches(tracer, runs, block, cancelled, over_time) for block in blocks)
     else:  # the same runs of batches on a cluster's workers (distributed.py), in batch order
         job = TraceJob(scene, texels, settings, names, bounces, batch_size, reach, context)
         partials = cluster.partials(job, blocks, cancelled, trace_progress, _worker_bytes(need, texels, runs, blocks))
@@ -317,6 +340,12 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
             trace_progress(totals.stats.photons)
             if cancelled():
                 raise BakeCancelled()
+            if preview is not None and runs[primary].streaming:
+                preview(Snapshot(primary, totals.stats.photons, share, max(current.values(), default=None), texels,
+                                 partial(_snapshot_value, totals.sums[primary]["irradiance"], direct_e, share)))
+            if stop is not None and totals.batches < tracer.batch_count and stop():
+                stopped_by = "user"
+                break
             over = part.stopped or (settings.time_limit and time.perf_counter() - t_start > settings.time_limit)
             if over and totals.batches < tracer.batch_count:
                 stopped_by = "time_limit"
@@ -352,13 +381,13 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
                          "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": batch_size}
         if name in noise:
             result.noise = noise[name].relative(texels.lightmaps, result.value * np.pi)
-        elif name == "photon_map":  # DESIGN.md §2: about 1/√(k − 1) whatever the photon count
-            k = settings.estimator_settings.k
-            result.noise = {lm.name: 1.0 / np.sqrt(k - 1) for lm in texels.lightmaps}
+        elif runs[name].fixed_noise(settings.estimator_settings) is not None:
+            fixed = runs[name].fixed_noise(settings.estimator_settings)
+            result.noise = {lm.name: fixed for lm in texels.lightmaps}
         result.warnings.extend(layout_warnings(texels, settings.estimator_settings,
-                                               radius if name != "photon_map" else None))
+                                               radius if runs[name].discs else None))
         k = settings.estimator_settings.k
-        if name == "photon_map" and result.counters.get("hits", k) < k:
+        if runs[name].stores_hits and result.counters.get("hits", k) < k:
             result.warnings.append(f"setting 'k' = {k} is more than the {result.counters['hits']:,} photons the "
                                    "photon map stored: every texel averaged all of them (a blur over the scene); "
                                    "trace more photons or lower k")
@@ -460,7 +489,7 @@ def _worker_bytes(need: memory.Estimate, texels, runs, blocks) -> tuple[int, int
     """(bytes a worker keeps for a bake, bytes one block's sums add), for sizing a cluster's units."""
     fixed = need.total - need.parts.get("photon map hits", 0) - need.parts["lightmap images"]
     per_block = sum(len(texels) * 3 * 8 for est in runs.values() if est.streaming)
-    if "photon_map" in runs and blocks:
+    if blocks and any(est.stores_hits for est in runs.values()):
         per_block += need.parts.get("photon map hits", 0) // len(blocks)
     return int(fixed), int(per_block)
 
@@ -521,6 +550,11 @@ def layout_warnings(texels, estimator_settings, radius=None) -> list:
     return out
 
 
+def _snapshot_value(irradiance, direct_e, share) -> np.ndarray:
+    irradiance = irradiance / share
+    return (irradiance if direct_e is None else irradiance + direct_e) / np.pi
+
+
 def _finish(settings, bounces, texels, est, tracer, seconds, direct_e=None, direct_info=None) -> BakeResult:
     """E/π per texel (Cycles' Diffuse bake unit, DIRECT+INDIRECT, no COLOR), as dilated images."""
     irradiance = est.irradiance if direct_e is None else est.irradiance + direct_e
@@ -556,10 +590,8 @@ def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) ->
     """The bake's peak memory, estimated before any work; over the budget (the setting, else 80 %
     of what the system has free) it is a BakeError that says what to lower."""
     pixels = sum(o.resolution * o.resolution for o in scene.objects if o.bake)
-    from .estimators import REGISTRY, _load_all
-    _load_all()
-    per_texel = {n: REGISTRY[n].bytes_per_texel for n in names}
-    hits = int(settings.photons * per_photon_kept) if "photon_map" in names else 0
+    per_texel = {n: estimators.get(n).bytes_per_texel for n in names}
+    hits = int(settings.photons * per_photon_kept) if any(estimators.get(n).stores_hits for n in names) else 0
     geometry = scene.positions.nbytes + scene.normals.nbytes + scene.uvs.nbytes + 24 * scene.triangle_count
     need = memory.estimate(pixels, per_texel, batch, per_photon, per_photon_kept,
                            settings.threads or os.cpu_count() or 1, hits, geometry)

@@ -10,16 +10,18 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import sys
 import time
 from pathlib import Path
 from dataclasses import replace
 from typing import Optional, Sequence
 
-from . import __version__, bake as bake_mod, images, interrupt, output
+from . import __version__, bake as bake_mod, estimators, images, interrupt, job as job_mod, output
 from .errors import BakeCancelled, BakeError
-from .estimators import EstimatorSettings, names as estimator_names
+from .estimators import KERNELS, EstimatorSettings, compare_defaults, names as estimator_names
+
+# Every default and choice below comes from BakeSettings, EstimatorSettings and the estimator registry.
+_B, _E = bake_mod.BakeSettings, EstimatorSettings
 
 
 def build_parser(prog: str = "python -m detp_bake", with_scene_path: bool = True) -> argparse.ArgumentParser:
@@ -29,9 +31,9 @@ def build_parser(prog: str = "python -m detp_bake", with_scene_path: bool = True
     sub = parser.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bake", help="bake lightmaps for a .blend file")
     c = sub.add_parser("compare", help="bake the same photons with several estimators, side by side")
-    c.add_argument("--estimators", nargs="+", default=["photon_map", "sphere_cache", "disc_index"],
-                   help="estimators to compare; the first is the reference (default: photon_map sphere_cache "
-                        "disc_index)")
+    c.add_argument("--estimators", nargs="+", default=compare_defaults(), metavar="ESTIMATOR",
+                   help="estimators to compare; the first is the reference "
+                                             "(default: %s)" % " ".join(compare_defaults()))
     for p in (b, c):
         _bake_arguments(p, with_scene_path)
     return parser
@@ -41,40 +43,42 @@ def _bake_arguments(b, with_scene_path):
     if with_scene_path:
         b.add_argument("scene", help="the .blend file to bake")
     b.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake (default: all visible meshes)")
-    b.add_argument("--estimator", default="disc_index",
-                   help=f"one of: {', '.join(estimator_names())} (default disc_index)")
+    b.add_argument("--estimator", default=_B.estimator,
+                   help=f"one of: {', '.join(estimator_names())} (default %(default)s)")
     b.add_argument("--photons", type=int, default=None,
-                   help="photons to trace (default 1M; with --target-noise or --time-limit, the most to trace, "
-                        "default 1G)")
-    b.add_argument("--target-noise", type=float, default=0.0, metavar="PERCENT",
+                   help=f"photons to trace (default {bake_mod._si(_B.photons)}; with --target-noise or --time-limit, "
+                        f"the most to trace, default {bake_mod._si(bake_mod.MAX_PHOTONS)})")
+    b.add_argument("--target-noise", type=float, default=_B.target_noise, metavar="PERCENT",
                    help="trace photons in batches until every lightmap's relative noise is at most this")
-    b.add_argument("--time-limit", type=float, default=0.0, metavar="SECONDS",
+    b.add_argument("--time-limit", type=float, default=_B.time_limit, metavar="SECONDS",
                    help="stop tracing before the bake has run this long (the photons so far stand for all)")
-    b.add_argument("--direct", default="sampled", choices=bake_mod.DIRECT_MODES,
+    b.add_argument("--direct", default=_B.direct, choices=bake_mod.DIRECT_MODES,
                    help="sampled: direct light by shadow rays, photons carry indirect light only (default); "
                         "photons: the estimator sees every segment (the paper's experiments)")
-    b.add_argument("--direct-samples", type=int, default=bake_mod.BakeSettings.direct_samples,
+    b.add_argument("--direct-samples", type=int, default=_B.direct_samples,
                    help="shadow rays per texel for each light with extent (default %(default)s)")
-    b.add_argument("--k", type=int, default=100, help="photon map neighbours (default 100)")
-    b.add_argument("--radius-texels", type=float, default=None,
-                   help="DETP disc radius in texels (default 3 with --direct sampled, 1.5 with --direct photons)")
-    b.add_argument("--radius", type=float, default=None, help="DETP disc radius in metres (overrides texels)")
-    b.add_argument("--q", type=float, default=0.65, help="sphere cache radius ratio (default 0.65)")
-    b.add_argument("--kernel", default="constant", choices=("constant", "epanechnikov"))
-    b.add_argument("--hybrid-moving", default="sphere_cache", choices=("sphere_cache", "disc_index"),
-                   help="hybrid: estimator for the moving objects' texels (default sphere_cache, the paper's)")
-    b.add_argument("--resolution", type=int, default=128, help="lightmap size in pixels (default 128)")
-    b.add_argument("--margin", type=int, default=16, help="dilation margin in pixels (default 16)")
-    b.add_argument("--bounces", type=int, default=None,
+    b.add_argument("--k", type=int, default=_E.k, help="photon map neighbours (default %(default)s)")
+    b.add_argument("--radius-texels", type=float, default=_E.radius_texels,
+                   help=f"DETP disc radius in texels (default {estimators.RADIUS_TEXELS_INDIRECT:g} with --direct "
+                        f"sampled, {estimators.RADIUS_TEXELS_ALL:g} with --direct photons)")
+    b.add_argument("--radius", type=float, default=_E.radius, help="DETP disc radius in metres (overrides texels)")
+    b.add_argument("--q", type=float, default=_E.q, help="sphere cache radius ratio (default %(default)s)")
+    b.add_argument("--kernel", default=_E.kernel, choices=KERNELS)
+    b.add_argument("--hybrid-moving", default=_E.hybrid_moving, choices=("sphere_cache", "disc_index"),
+                   help="hybrid: estimator for the moving objects' texels (default %(default)s, the paper's)")
+    b.add_argument("--resolution", type=int, default=_B.resolution, help="lightmap size in pixels (default %(default)s)")
+    b.add_argument("--margin", type=int, default=_B.margin, help="dilation margin in pixels (default %(default)s)")
+    b.add_argument("--bounces", type=int, default=_B.bounces,
                    help="diffuse bounces (default: the scene's Cycles Light Paths › Diffuse)")
-    b.add_argument("--seed", type=int, default=0)
-    b.add_argument("--threads", type=int, default=0, help="0 = all cores")
+    b.add_argument("--seed", type=int, default=_B.seed)
+    b.add_argument("--threads", type=int, default=_B.threads, help="0 = all cores")
     b.add_argument("--uv-layer", default=None,
                    help="lightmap UV layer (default 'Lightmap', created with Lightmap Pack if missing)")
     b.add_argument("--out", required=True, help="output folder")
-    b.add_argument("--format", default="exr", help="comma-separated: exr,png (default exr)")
+    b.add_argument("--format", default=",".join(_B.formats),
+                   help=f"comma-separated: {','.join(images.WRITERS)} (default %(default)s)")
     b.add_argument("--half", action="store_true", help="write half-float EXR")
-    b.add_argument("--denoise", action=argparse.BooleanOptionalAction, default=True,
+    b.add_argument("--denoise", action=argparse.BooleanOptionalAction, default=_B.denoise,
                    help="denoise the lightmaps with OIDN (default on; needs the pyoidn package)")
     b.add_argument("--keep-raw", action="store_true",
                    help="also write each lightmap before denoising, as <object>.<estimator>.raw.exr")
@@ -188,6 +192,47 @@ def _check_cancel(cancel) -> None:
         raise BakeCancelled()
 
 
+def _run_job(job: job_mod.Job, cancel=None, said=()) -> job_mod.Result:
+    """Run a job to its end, its progress and warnings on stderr (but those in `said`, which the
+    command line has said already); `cancel()` true (a signal, interrupt.py) cancels it."""
+    progress = StderrProgress()
+    said = set(said)
+
+    def events():  # as they come; a signal is seen within 0.1 s even while no event comes
+        job.start()
+        while True:
+            got = job.poll()
+            if not got:
+                if cancel is not None and cancel() and not job.cancelling:
+                    job.cancel()
+                time.sleep(0.1)
+            for event in got:
+                yield event
+                if isinstance(event, job_mod.TERMINAL):
+                    return
+
+    try:
+        for event in events():
+            if isinstance(event, job_mod.Progress):
+                progress(event)
+            elif isinstance(event, job_mod.Warning):
+                if event.message not in said:
+                    _log(f"warning: {event.message}")
+            elif isinstance(event, job_mod.Error):
+                raise BakeError(event.message)
+            elif isinstance(event, job_mod.Cancelled):
+                raise BakeCancelled()
+            elif isinstance(event, job_mod.Result):
+                return event
+            if cancel is not None and cancel() and not job.cancelling:
+                job.cancel()  # the worker stops within a batch and removes what it staged
+    except KeyboardInterrupt:
+        job.cancel()
+        job.thread.join()  # the worker stops within a batch and removes what it staged
+        raise BakeCancelled() from None
+    raise BakeError("the job ended without a result")
+
+
 def run_compare(args, bl_scene=None, cancel=None) -> dict:
     """The same photons through several estimators: their lightmaps, compare.png, compare.json and
     one report.json with a section per estimator, all written together."""
@@ -199,31 +244,16 @@ def run_compare(args, bl_scene=None, cancel=None) -> dict:
         replace(settings, estimator=name).validate()
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene, warn)
     _check_cancel(cancel)
-    from . import comparison
-    results = bake_mod.compute_many(scene, settings, args.estimators, StderrProgress(), cancel,
-                                    cluster=getattr(args, "cluster", None))
-    for result in results.values():
-        result.seconds["export"] = export_seconds
-        output.warn_stale(out_dir, result, warn)
-    ours = list(warn)
-    for w in dict.fromkeys(w for r in results.values() for w in r.warnings):
-        warn(w)
-    for result in results.values():  # each section: the command line's warnings and its own
-        result.warnings = ours + result.warnings
-    first = results[args.estimators[0]]
-    seconds = {n: r.seconds["estimate"] for n, r in results.items()}
-    picture, diffs = comparison.comparison_image({n: r.images for n, r in results.items()}, first.masks, seconds)
-    summary = {"estimators": args.estimators, "seconds": seconds, "difference_to_first": diffs,
-               "trace_seconds": first.seconds["trace"], "photons": first.stats.photons}
-    extra = {"compare.png": lambda tmp: images.write_png(tmp, picture),
-             "compare.json": lambda tmp: tmp.write_text(json.dumps(
-                 {**summary, "files": {n: r.files for n, r in results.items()}}, indent=2))}
-    report = bake_mod.write_many(results, out_dir, StderrProgress(), cancel, extra=extra,
-                                 summary={"comparison": summary})
-    for name in args.estimators:
-        _log(f"{name}: estimate {seconds[name]:.2f} s, difference to {args.estimators[0]} {100 * diffs[name]:.1f} %")
-    return {"command": "compare", "files": {n: r.files for n, r in results.items()},
-            "extra": [str(out_dir / name) for name in extra], "report": str(report), "warnings": list(warn), **summary}
+    done = _run_job(job_mod.Job(scene, settings, out_dir, args.estimators, export_seconds=export_seconds,
+                                warnings=list(warn), cluster=getattr(args, "cluster", None)), cancel, warn)
+    summary = done.comparison
+    for name in summary["estimators"]:
+        _log(f"{name}: estimate {summary['seconds'][name]:.2f} s, difference to {summary['reference']} "
+             f"{100 * summary['difference_to_first'][name]:.1f} %")
+    warnings = list(dict.fromkeys(w for r in done.results.values() for w in r.warnings))
+    return {"command": "compare", "files": {n: r.files for n, r in done.results.items()},
+            "extra": summary["extra"], "report": summary["report"], "warnings": warnings,
+            **{k: summary[k] for k in ("estimators", "seconds", "difference_to_first", "trace_seconds", "photons")}}
 
 
 def _log_noise(result) -> None:
@@ -244,12 +274,11 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
         return run_frames(args, settings, bl_scene, cancel, warn)
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene, warn)
     _check_cancel(cancel)
-    result = bake_mod.compute(scene, settings, StderrProgress(), cancel, cluster=getattr(args, "cluster", None))
-    result.seconds["export"] = export_seconds
+    done = _run_job(job_mod.Job(scene, settings, out_dir, export_seconds=export_seconds, warnings=list(warn),
+                                cluster=getattr(args, "cluster", None)), cancel, warn)
+    result = done.results[settings.estimator]
     _log_noise(result)
-    output.warn_stale(out_dir, result, warn)
-    output.gather_warnings(result, warn)
-    report = bake_mod.write(result, out_dir, StderrProgress(), cancel)
+    report = done.report
     # The files are in place: from here on a signal no longer undoes the bake.
     saved = None
     if args.apply:
@@ -260,7 +289,7 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
         _log(f"saved {saved}")
     return {"command": "bake", "files": result.files, "report": str(report), "saved": str(saved) if saved else None,
             "estimator": settings.estimator, "photons": result.stats.photons, "stopped_by": result.stopped_by,
-            "noise": {n: round(100.0 * v, 3) for n, v in result.noise.items()}, "warnings": list(warn)}
+            "noise": {n: round(100.0 * v, 3) for n, v in result.noise.items()}, "warnings": list(result.warnings)}
 
 
 def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> dict:

@@ -59,3 +59,33 @@ def _label(strip: np.ndarray, text: str) -> np.ndarray:
     buf = oiio.ImageBuf(oiio.ImageSpec(w, h, 3, "float"))
     oiio.ImageBufAlgo.render_text(buf, 4, h - 6, text, 14, "", (1.0, 1.0, 1.0))
     return np.asarray(buf.get_pixels(oiio.FLOAT), np.float32).reshape(h, w, 3)
+
+
+SUMMARY = ("estimators", "reference", "photons", "trace_seconds", "seconds", "difference_to_first")
+
+
+def report_files(results: dict, names: list) -> tuple[dict, dict]:
+    """One report for a comparison, what every front end writes (bake.write_many stages it with
+    the lightmaps, all or nothing): compare.png (the grid) and compare.json, with the shared
+    photons once and a section per estimator (its settings, counters, noise, seconds and files,
+    as its own report.json has them, plus its difference to the reference, the first of `names`).
+    Returns (the summary, {file name: write(path)})."""
+    import json
+
+    from . import images
+    first = results[names[0]]
+    seconds = {n: results[n].seconds["estimate"] for n in names}
+    picture, diffs = comparison_image({n: results[n].images for n in names}, first.masks, seconds)
+    summary = {"estimators": list(names), "reference": names[0], "photons": first.stats.photons,
+               "trace_seconds": first.seconds["trace"], "seconds": seconds, "difference_to_first": diffs}
+
+    def compare_json(path):
+        sections = {}
+        for name in names:  # read when staged: the lightmaps' paths are known by then
+            section = results[name].report()
+            section["difference_to_reference"] = diffs[name]
+            sections[name] = section
+        path.write_text(json.dumps({**summary, "files": {n: results[n].files for n in names},
+                                    "image": "compare.png", "sections": sections}, indent=2))
+
+    return summary, {"compare.png": lambda path: images.write_png(path, picture), "compare.json": compare_json}

@@ -56,7 +56,7 @@ def _write(oiio, path, spec, data) -> None:
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:
-    """(H, W, C) float32 with row 0 at the bottom."""
+    """(H, W, C) float32 with row 0 at the bottom: a written lightmap read back (tests, tools)."""
     oiio = _oiio()
     inp = oiio.ImageInput.open(str(path))
     if inp is None:

@@ -1,85 +1,89 @@
 """The Bake operator over a frame range (the panel's Frame Range): every frame is exported on the
-main thread first (bpy is not thread-safe), then the worker thread bakes them one after the other
-with frames.bake_frames; Esc keeps the frames already finished, as a shorter sequence. With Apply
-After Bake (and a step of 1) the lightmaps go on as image sequences that follow the timeline."""
+main thread first (bpy is not thread-safe), then a frames job (detp_bake/job.py) bakes them one
+after the other on its worker; Esc keeps the frames already finished, as a shorter sequence. With
+Apply After Bake (and a step of 1) the lightmaps go on as image sequences that follow the timeline."""
 import json
+import time
+from dataclasses import replace
 
-from ..detp_bake import blender, frames, memory
-from ..detp_bake.errors import BakeCancelled, BakeError
+from ..detp_bake import blender, frames, job as job_mod, memory
+from ..detp_bake.errors import BakeError
+from . import common
 from .bake import BakeJob
 
 
-class FramesJob(BakeJob):
-    """A BakeJob whose `run` bakes a frame range (the exported frames are held in memory)."""
+class FramesBlenderJob(BakeJob):
+    """A bake of the scene's frame range (the exported frames are held in memory until it ends)."""
 
     def __init__(self, context):
-        super().__init__(context)
+        super().__init__(context, preview=0.0)  # no live preview across frames
         s = context.scene.detp_bake
+        self.kind = "frames"
         self.range_text = f"{s.frame_start}-{s.frame_end}:{s.frame_step}"
         self.moving = [o.name for o in context.scene.objects if o.detp_bake.motion == "MOVING"]
         self.static = [o.name for o in context.scene.objects if o.detp_bake.motion == "STATIC"]
-        self.scenes = {}
-        self.frames_result = None
+        self.frame_range = None
 
     def prepare(self, context) -> None:
+        busy = job_mod.busy_message()
+        if busy:
+            raise job_mod.JobBusy(busy)
+        replace(self.settings).validate()
+        if not self.objects:
+            raise BakeError("nothing to bake: no visible mesh with 'Include' set in the scene")
         self.frame_range = frames.parse_frames(self.range_text)
-        with blender.frame_kept(context.scene):
-            for frame in self.frame_range.frames():
-                context.scene.frame_set(frame)
-                super().prepare(context)
-                self.scenes[frame] = self.scene
-                held = sum(sc.positions.nbytes * 3 for sc in self.scenes.values())
-                free = memory.available_bytes()  # 0: cannot say
-                if free and held > 0.5 * free:
-                    blender.remove_uv_layers(context.scene, self.created_uv)
-                    raise BakeError(f"the frame range's exported scenes would need more than {held / 1e9:.1f} GB "
-                                    "of memory here: bake a shorter range, or from the command line (python -m "
-                                    "detp_bake bake --frames), which exports frame by frame")
-        self.messages = list(dict.fromkeys(self.messages))  # each export says the same
-        names = {o.name for scene in self.scenes.values() for o in scene.objects}
-        self.moving = [n for n in self.moving if n in names]  # overrides on lights, empties, ... say nothing
-        self.static = [n for n in self.static if n in names]
-
-    def run(self) -> None:
+        s = self.bl_scene.detp_bake
+        if not s.output_directory.strip() or (s.output_directory.startswith("//") and not context.blend_data.filepath):
+            raise BakeError("setting 'output_directory' is relative to the .blend: save the file first "
+                            "or choose an absolute folder")
+        from ..detp_bake import images
+        images.check_writable_dir(self.out_dir)
+        scenes = {}
+        t0 = time.perf_counter()
         try:
-            self.frames_result = frames.bake_frames(self.scenes.__getitem__, self.frame_range, self.settings,
-                                                    self.out_dir, self._on_progress, self.cancel, self.moving,
-                                                    self.static, self.messages.append)
-            self.cancelled = self.frames_result.cancelled
-        except BakeCancelled:
-            self.cancelled = True
-        except BakeError as exc:
-            self.error = str(exc)
-        except Exception as exc:  # a bug: say so instead of dying silently in a thread
-            import traceback
-            traceback.print_exc()
-            self.error = f"unexpected error: {exc!r}"
-        self.scenes.clear()
+            with blender.frame_kept(self.bl_scene):
+                for frame in self.frame_range.frames():
+                    self.bl_scene.frame_set(frame)
+                    scenes[frame] = common.export(context, [self.bl_scene.objects[n] for n in self.objects],
+                                                  self.messages.append, self.created_uv)
+                    held = sum(sc.positions.nbytes * 3 for sc in scenes.values())
+                    free = memory.available_bytes()  # 0: cannot say
+                    if free and held > 0.5 * free:
+                        raise BakeError(f"the frame range's exported scenes would need more than {held / 1e9:.1f} "
+                                        "GB of memory here: bake a shorter range, or from the command line "
+                                        "(python -m detp_bake bake --frames), which exports frame by frame")
+        except BaseException:
+            blender.remove_uv_layers(self.bl_scene, self.created_uv)
+            raise
+        self.export_seconds = time.perf_counter() - t0
+        self.messages = list(dict.fromkeys(self.messages))  # each export says the same
+        names = {o.name for scene in scenes.values() for o in scene.objects}
+        moving = [n for n in self.moving if n in names]  # overrides on lights, empties, ... say nothing
+        static = [n for n in self.static if n in names]
+        self.job = job_mod.FramesJob(scenes.__getitem__, self.frame_range, self.settings, self.out_dir,
+                                     moving=moving, static=static, export_seconds=self.export_seconds)
 
-    def finish(self, context, report) -> set:
-        for msg in self.messages:
+    def finish(self, report) -> set:
+        for msg in self.messages + (self.job.notes if self.job is not None else []):
             report({"INFO"}, msg)
-        r = self.frames_result
-        if self.error or r is None or not r.frames:
-            blender.remove_uv_layers(context.scene, self.created_uv)
-            if self.error:
-                report({"ERROR"}, self.error)
-            else:
-                report({"WARNING"}, "Bake cancelled: no frame was finished")
-            return {"CANCELLED"}
-        s = context.scene.detp_bake
-        if s.apply_after_bake and "exr" in self.settings.formats and self.frame_range.step == 1:
+        if not isinstance(self.outcome, job_mod.Result):
+            return self.failed(report)
+        self.end()
+        r = self.outcome.frames
+        scene = self.bl_scene
+        if scene.detp_bake.apply_after_bake and "exr" in self.settings.formats and self.frame_range.step == 1:
             first = r.frames[0]
             end = max(f for i, f in enumerate(r.frames) if f == first + i)
-            from . import common
-            uv = common.uv_layers([context.scene.objects[n] for n in self.objects if n in context.scene.objects])
-            blender.apply_all(context.scene, r.files[first], uv, self.settings.estimator, frames=(first, end))
+            uv = common.uv_layers([scene.objects[n] for n in self.objects if n in scene.objects])
+            blender.apply_all(scene, r.files[first], uv, self.settings.estimator, frames=(first, end))
         last = r.sections[-1]
-        context.scene.detp_bake.last_report = json.dumps({
+        scene.detp_bake.last_report = json.dumps({
             "estimator": self.settings.estimator, "photons": last["photons"], "segments": last["segments"],
             "objects": len(r.files[r.frames[-1]]), "seconds": last["seconds"], "noise": last["noise"],
             "stopped_by": last["stopped_by"], "frames": r.frames, "output_directory": self.out_dir,
             "files": r.files[r.frames[-1]]})
+        for warning in self.warnings:
+            report({"WARNING"}, warning)
         done = f"{len(r.frames)} of {len(self.frame_range.frames())} frames" if r.cancelled else f"{len(r.frames)} frames"
         report({"WARNING"} if r.cancelled else {"INFO"},
                f"Baked {done} with {self.settings.estimator} to {self.out_dir}"

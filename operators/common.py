@@ -75,11 +75,15 @@ def export(context, objects, log, created=None):
     return scene
 
 
+ACTIVE = None  # the BlenderJob (operators/job.py) of the running bake or compare, until it is finished
+
+
 def idle(cls, context) -> bool:
-    """The poll of every operator that bakes: one bake at a time per Blender session (two would
-    share numba's thread pool), saying why when one runs."""
-    from .bake import DETPBAKE_OT_bake
-    if DETPBAKE_OT_bake._running:
-        cls.poll_message_set("a bake is running: wait for it or press Esc")
+    """The poll of every operator that runs a job: one job at a time per Blender session (two would
+    share numba's thread pool; detp_bake/job.py holds the lock), saying why when one runs."""
+    from ..detp_bake import job
+    busy = job.busy_message() or (f"a {ACTIVE.kind} is finishing" if ACTIVE is not None else None)
+    if busy:
+        cls.poll_message_set(busy)
         return False
     return context.scene is not None

@@ -1,15 +1,17 @@
 """`detp_bake.compare` bakes the same photons with several estimators and shows them side by side:
 a collection of linked duplicates, one row per estimator, each showing its own lightmaps, with a
-label; plus a comparison image. `detp_bake.compare_clear` removes all of it."""
+label; plus a comparison image and one report (comparison.report_files). It runs as a job, like
+Bake: modal, with progress and Esc. `detp_bake.compare_clear` removes all of it."""
 import bpy
 import numpy as np
 from bpy.props import EnumProperty
 from mathutils import Matrix
 
-from ..detp_bake import bake, blender, comparison, images
-from ..detp_bake.errors import BakeCancelled, BakeError
+from ..detp_bake import blender, estimators, job as job_mod
 from ..ui.properties import ESTIMATORS
 from . import common
+from .bake import JobOperator
+from .job import BlenderJob
 
 COLLECTION = "detp_bake compare"
 MARK = "detp_bake_compare"
@@ -35,34 +37,35 @@ def clear(context) -> int:
     return removed
 
 
-def run_compare(context, names, report, progress=None, cancel=None) -> dict:
-    """Bake, write, build the side-by-side scene and the image. Returns a summary dict."""
-    settings = common.bake_settings(context)
-    out_dir = common.output_directory(context)
-    objects = common.bake_targets(context)
-    if not objects:
-        raise BakeError("nothing to compare: no visible mesh with 'Include' set")
-    images.check_writable_dir(out_dir)
-    created = []
-    try:
-        scene = common.export(context, objects, lambda m: report({"INFO"}, m), created)
-        results = bake.compute_many(scene, settings, names, progress, cancel)
-        # One report.json with a section per estimator, the lightmaps of all, written together.
-        bake.write_many(results, out_dir, progress, cancel, summary={"comparison": {"estimators": names}})
-    except BaseException:
-        blender.remove_uv_layers(context.scene, created)
-        raise
-    clear(context)
-    seconds = {n: r.seconds["estimate"] for n, r in results.items()}
-    first = results[names[0]]
-    picture, diffs = comparison.comparison_image({n: r.images for n, r in results.items()}, first.masks, seconds)
-    png = f"{out_dir.rstrip('/')}/compare.png"
-    images.write_png(png, picture)
-    img = bpy.data.images.load(png, check_existing=False)
-    img.name = IMAGE
+class CompareJob(BlenderJob):
+    """A comparison: its finish lays the estimators' lightmaps out side by side."""
 
+    def finish(self, report) -> set:
+        for msg in self.messages:
+            report({"INFO"}, msg)
+        if not isinstance(self.outcome, job_mod.Result):
+            return self.failed(report)
+        self.end()
+        scene = self.bl_scene
+        objects = [scene.objects[n] for n in self.objects if n in scene.objects]
+        summary = self.outcome.comparison
+        lay_out(scene, objects, self.outcome.results, self.names, summary)
+        for warning in dict.fromkeys(self.warnings):
+            report({"WARNING"}, warning)
+        parts = ", ".join(f"{n} {summary['seconds'][n]:.2f} s" for n in self.names)
+        report({"INFO"}, f"Compared {parts}; report {summary['report']}")
+        return {"FINISHED"}
+
+
+def lay_out(scene, objects, results, names, summary) -> None:
+    """The side-by-side scene: a row of linked duplicates per estimator, each with its own
+    lightmaps and a label, and the comparison image in every Image Editor."""
+    clear(bpy.context)
+    seconds, diffs = summary["seconds"], summary["difference_to_first"]
+    img = bpy.data.images.load(summary["image"], check_existing=False)
+    img.name = IMAGE
     coll = bpy.data.collections.new(COLLECTION)
-    context.scene.collection.children.link(coll)
+    scene.collection.children.link(coll)
     corners = np.array([o.matrix_world @ v.co for o in objects for v in o.data.vertices]) if objects else np.zeros((1, 3))
     lo, hi = corners.min(axis=0), corners.max(axis=0)
     step = (hi[0] - lo[0]) * 1.25 + 0.5
@@ -82,7 +85,7 @@ def run_compare(context, names, report, progress=None, cancel=None) -> dict:
                 c.objects.unlink(dup)
             coll.objects.link(dup)
             dups[obj.name] = dup
-        blender.apply_all(context.scene, results[name].files, uv, name, objects=dups, copy_materials=True)
+        blender.apply_all(scene, results[name].files, uv, name, objects=dups, copy_materials=True)
         curve = bpy.data.curves.new(f"detp_bake label {name}", "FONT")
         curve.body = f"{name}\n{seconds[name]:.2f} s   diff {100 * diffs[name]:.1f} %"
         curve.size = max(0.1, (hi[2] - lo[2]) * 0.08)
@@ -92,54 +95,40 @@ def run_compare(context, names, report, progress=None, cancel=None) -> dict:
         label[MARK] = name
         coll.objects.link(label)
     if not bpy.app.background:
-        for window in context.window_manager.windows:
+        for window in bpy.context.window_manager.windows:
             for area in window.screen.areas:
                 if area.type == "IMAGE_EDITOR":
                     area.spaces.active.image = img
-    return {"estimators": names, "seconds": seconds, "difference": diffs, "image": png}
 
 
-class DETPBAKE_OT_compare(bpy.types.Operator):
+class DETPBAKE_OT_compare(JobOperator, bpy.types.Operator):
     """Bake the same photons with several estimators and show them side by side next to the scene"""
     bl_idname = "detp_bake.compare"
     bl_label = "Compare Estimators"
     bl_options = {"REGISTER", "UNDO"}
 
     estimators: EnumProperty(name="Estimators", options={"ENUM_FLAG"}, items=ESTIMATORS,
-                             default={"photon_map", "sphere_cache", "disc_index"})
+                             default=set(estimators.compare_defaults()))
 
     @classmethod
     def poll(cls, context):
         return common.idle(cls, context)
 
+    def make_job(self, context):
+        return CompareJob(context, estimators.compare_order(self.estimators))
+
     def invoke(self, context, event):
         self.estimators = set(context.scene.detp_bake.compare_estimators)
-        return self.execute(context)
-
-    def execute(self, context):
-        order = [e[0] for e in ESTIMATORS]
-        chosen = set(self.estimators)
-        names = [n for n in ("photon_map", *order) if n in chosen]
-        names = list(dict.fromkeys(names))
-        if len(names) < 1:
+        if not self.estimators:
             self.report({"ERROR"}, "choose at least one estimator to compare")
             return {"CANCELLED"}
-        wm = context.window_manager
-        wm.progress_begin(0, 100)
-        try:
-            summary = run_compare(context, names, self.report,
-                                  lambda p: wm.progress_update(int(100 * p.fraction)))
-        except BakeError as exc:
-            self.report({"ERROR"}, str(exc))
+        return JobOperator.invoke(self, context, event)
+
+    def execute(self, context):
+        if not self.estimators:
+            self.report({"ERROR"}, "choose at least one estimator to compare")
             return {"CANCELLED"}
-        except BakeCancelled:
-            self.report({"WARNING"}, "Comparison cancelled")
-            return {"CANCELLED"}
-        finally:
-            wm.progress_end()
-        parts = ", ".join(f"{n} {summary['seconds'][n]:.2f} s" for n in names)
-        self.report({"INFO"}, f"Compared {parts}; image {summary['image']}")
-        return {"FINISHED"}
+        return JobOperator.execute(self, context)
 
 
 class DETPBAKE_OT_compare_clear(bpy.types.Operator):

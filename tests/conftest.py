@@ -1,5 +1,10 @@
 """Test set-up: the repository root on sys.path, and Blender's user folder in a temp dir so the
-bpy wheel writes nothing to the user's home."""
+bpy wheel writes nothing to the user's home.
+
+Without the bpy wheel (`make test-core`) the core tests run and every test that needs Blender is
+skipped for one reason, NO_BPY: a module that imports bpy (directly or through detp_bake.blender)
+is skipped as a whole, a test that asks for the `bpy` fixture is skipped alone."""
+import importlib.util
 import os
 import sys
 import tempfile
@@ -15,10 +20,42 @@ os.environ["BLENDER_USER_RESOURCES"] = _user
 os.environ.setdefault("BLENDER_USER_CONFIG", os.path.join(_user, "config"))
 
 CORNELL = ROOT / "sample_scenes" / "cornell_box.blend"
+HAVE_BPY = importlib.util.find_spec("bpy") is not None
+NO_BPY = "needs Blender: the bpy wheel is not installed in this environment"
+
+
+class _Module(pytest.Module):
+    """A test module that is skipped, not an error, when it cannot import bpy."""
+
+    def collect(self):
+        try:
+            return super().collect()
+        except self.CollectError as exc:
+            cause = exc.__cause__
+            if not HAVE_BPY and isinstance(cause, ImportError) and cause.name == "bpy":
+                pytest.skip(NO_BPY, allow_module_level=True)
+            raise
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests marked `blender` need bpy without asking for the fixture (a subprocess, the CLI)."""
+    if HAVE_BPY:
+        return
+    for item in items:
+        if item.get_closest_marker("blender"):
+            item.add_marker(pytest.mark.skip(reason=NO_BPY))
+
+
+def pytest_pycollect_makemodule(module_path, parent):
+    if module_path.name.startswith("test_"):
+        return _Module.from_parent(parent, path=module_path)
+    return None
 
 
 @pytest.fixture(scope="session")
 def bpy():
+    if not HAVE_BPY:
+        pytest.skip(NO_BPY)
     import bpy as _bpy
     return _bpy
 

@@ -154,30 +154,34 @@ def test_bake_operator_refuses_bad_settings_before_work(addon, cornell, bpy, tmp
 def test_cancel_at_each_phase_leaves_the_scene_unchanged(addon, empty_blend, bpy, tmp_path, phase):
     """The worker thread path of the modal operator, cancelled in each phase. The scene has no
     Lightmap UV layer, so the export creates one that a cancel must remove again."""
+    from detp_bake.job import Cancelled, Preview
     from detp_bake_addon.operators.bake import BakeJob
     plane_object(bpy, "Floor", 2.0, (0, 0, 0))
     bpy.ops.object.light_add(type="SUN", location=(0, 0, 3))
     bpy.ops.object.select_all(action="DESELECT")
-    _small(empty_blend, tmp_path / "out", estimator="sphere_cache")
+    _small(empty_blend, tmp_path / "out", estimator="sphere_cache", live_preview_interval=0.1)
     before = scene_snapshot(bpy)
     job = BakeJob(bpy.context)
     job.prepare(bpy.context)
     assert job.created_uv == [("Floor", "Lightmap")]
+    core = job.job
     if phase == "export":
-        job.cancel.set()
+        core.cancel()
     else:
-        hook = job._on_progress
+        hook = core._progress
 
-        def cancel_in_phase(p):
+        def cancel_in_phase(p):  # on the worker, so the cancel lands in that very phase
             hook(p)
             if p.phase == phase:
-                job.cancel.set()
-        job._on_progress = cancel_in_phase
-    job.start()
-    job.thread.join(timeout=60)
-    assert job.done and job.cancelled
+                core.cancel()
+        core._progress = cancel_in_phase
+    core.start()
+    while not job.handle(core.poll()):  # the modal operator's timer, without the timer
+        core.thread.join(timeout=0.05)
+    assert isinstance(job.outcome, Cancelled)
+    assert job.outcome.phase == phase or phase == "export"
     reports = []
-    assert job.finish(bpy.context, lambda kind, msg: reports.append(msg)) == {"CANCELLED"}
+    assert job.finish(lambda kind, msg: reports.append(msg)) == {"CANCELLED"}
     assert any("cancelled" in m for m in reports)
     assert scene_snapshot(bpy) == before
     assert not [p for p in (tmp_path / "out").iterdir() if p.suffix in (".exr", ".json")]
@@ -298,11 +302,74 @@ def test_an_instance_selected_says_how_to_bake_it_and_hidden_meshes_that_render_
 
 
 def test_compare_and_bake_are_greyed_out_while_a_bake_runs(addon, cornell, bpy):
-    """Two bakes at once would share numba's thread pool: while one runs, neither operator polls."""
-    from detp_bake_addon.operators.bake import DETPBAKE_OT_bake
+    """Two bakes at once would share numba's thread pool: while a job runs (the core's lock), or
+    waits for its finish on the main thread, neither operator polls."""
+    from detp_bake import job as job_mod
+    from detp_bake_addon.operators import common
     assert bpy.ops.detp_bake.compare.poll() and bpy.ops.detp_bake.bake.poll()
-    DETPBAKE_OT_bake._running = True
+    holder = job_mod.hold("bake")
     try:
+        job_mod._running = type("Running", (), {"kind": "bake"})()  # a job, as the lock sees it
         assert not bpy.ops.detp_bake.compare.poll() and not bpy.ops.detp_bake.bake.poll()
+        assert "bake is running" in job_mod.busy_message()
     finally:
-        DETPBAKE_OT_bake._running = False
+        job_mod._running = holder
+        job_mod.release(holder)
+    assert bpy.ops.detp_bake.bake.poll()
+    common.ACTIVE = type("Finishing", (), {"kind": "compare"})()
+    try:
+        assert not bpy.ops.detp_bake.bake.poll()
+    finally:
+        common.ACTIVE = None
+
+
+def _preview_pixels(bpy, name):
+    img = bpy.data.images[f"detp_bake preview {name}"]
+    px = np.empty(len(img.pixels), np.float32)
+    img.pixels.foreach_get(px)
+    return px
+
+
+def test_live_preview_refines_the_materials_images_and_esc_restores_the_scene(addon, cornell, bpy, tmp_path):
+    """A background-mode job through the operator's job: after each batch the Floor's material
+    shows the preview image, which changes; Stop and Keep ends it as a finished bake with the
+    photons traced; a cancelled job puts every material back."""
+    from detp_bake import job as job_mod
+    from detp_bake.images import file_stem  # noqa: F401  (the core the add-on uses)
+    from detp_bake_addon.operators.bake import BakeJob
+    _small(cornell, tmp_path / "a", photons=500_000, live_preview_interval=0.1)
+    before = scene_snapshot(bpy)
+
+    traced = []  # photons of each preview
+
+    def run(stop_after=None, cancel_after=None):
+        job = BakeJob(bpy.context, preview=1e-9)
+        job.prepare(bpy.context)
+        seen, traced[:] = [], []
+        for event in job.job.events():
+            job.handle([event])
+            if isinstance(event, job_mod.Preview):
+                mat = cornell.objects["Floor"].material_slots[0].material
+                tex = [n for n in mat.node_tree.nodes if n.type == "TEX_IMAGE" and n.parent is not None]
+                assert tex and tex[0].image.name == "detp_bake preview Floor"
+                seen.append(_preview_pixels(bpy, "Floor"))
+                traced.append(event.photons)
+                if len(seen) == stop_after:
+                    job.job.stop()
+                if len(seen) == cancel_after:
+                    job.job.cancel()
+        return job, seen, job.finish(lambda kind, msg: None)
+
+    job, seen, status = run(cancel_after=2)
+    assert status == {"CANCELLED"} and len(seen) == 2 and not np.array_equal(seen[0], seen[1])
+    assert scene_snapshot(bpy) == before  # Esc: the preview's materials and images are gone
+
+    job, seen, status = run(stop_after=1)
+    assert status == {"FINISHED"}
+    report = json.loads((tmp_path / "a" / "report.json").read_text())
+    # The worker may trace one more batch before the stop reaches it: the count is what it traced.
+    assert report["photons"] == traced[-1] < 500_000 and report["stopped_by"] == "user"
+    assert len(report["objects"]) == 7 and all(o["files"] for o in report["objects"])
+    assert json.loads(cornell.detp_bake.last_report)["photons"] == traced[-1]
+    assert "detp_bake preview Floor" not in bpy.data.images  # the applied lightmap replaced it
+    assert bpy.ops.detp_bake.revert() == {"FINISHED"}

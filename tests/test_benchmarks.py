@@ -31,6 +31,7 @@ def test_estimators_benchmark(tmp_path):
         assert row["crossings"] == by[("disc_index", radius)]["crossings"] > 0
 
 
+@pytest.mark.blender  # its scenes are .blend files
 def test_trace_benchmark(tmp_path):
     out = tmp_path / "trace.json"
     _run("trace.py", "--quick", "--json", str(out))
@@ -39,6 +40,7 @@ def test_trace_benchmark(tmp_path):
     assert rows and all(r["segments"] > 0 for r in rows)
 
 
+@pytest.mark.blender  # its scenes are .blend files
 def test_paper_benchmark(tmp_path):
     _run("paper.py", "--quick", "--scenes", "tree", "--out", str(tmp_path))
     data = json.loads((tmp_path / "paper.json").read_text())["results"]["tree"]
@@ -46,6 +48,7 @@ def test_paper_benchmark(tmp_path):
     assert "fitted exponent" in (tmp_path / "paper.md").read_text()
 
 
+@pytest.mark.blender  # its scenes are .blend files
 def test_quality_benchmark(tmp_path):
     _run("quality.py", "--quick", "--scenes", "cornell_box", "--sweep-scene", "cornell_box",
          "--compositor-check", "--out", str(tmp_path))

@@ -63,6 +63,7 @@ def test_bad_settings_are_named(capsys, tmp_path, extra, message):
     assert not out.exists() or not any(out.iterdir())
 
 
+@pytest.mark.blender
 def test_unreadable_scene_path(capsys, tmp_path):
     code, err = _run_main(capsys, ["bake", str(tmp_path / "missing.blend"), "--out", str(tmp_path / "o")])
     assert code == 2 and "missing.blend" in err
@@ -77,12 +78,14 @@ def test_unwritable_output_dir_is_refused_before_tracing(capsys, tmp_path):
     assert "Tracing" not in err
 
 
+@pytest.mark.blender
 def test_missing_named_uv_layer_names_the_object(capsys, tmp_path):
     code, err = _run_main(capsys, ["bake", str(CORNELL), "--uv-layer", "Baked", "--out", str(tmp_path)])
     assert code == 2 and "has no UV layer 'Baked'" in err and "object '" in err
     assert not any(tmp_path.iterdir())
 
 
+@pytest.mark.blender
 def test_unknown_object_is_named(capsys, tmp_path):
     code, err = _run_main(capsys, ["bake", str(CORNELL), "--objects", "Teapot", "--out", str(tmp_path)])
     assert code == 2 and "'Teapot'" in err

@@ -19,13 +19,33 @@ class DETPBAKE_PT_main(_Panel, bpy.types.Panel):
         layout = self.layout
         s = context.scene.detp_bake
         layout.prop(s, "estimator")
-        row = layout.row()
-        row.scale_y = 1.5
-        row.operator("detp_bake.bake", icon="RENDER_STILL")
+        from ..operators import common
+        active = common.ACTIVE
+        if active is not None and active.job is not None:
+            self.draw_running(layout, active)
+        else:
+            row = layout.row()
+            row.scale_y = 1.5
+            row.operator("detp_bake.bake", icon="RENDER_STILL")
         row = layout.row(align=True)
         row.operator("detp_bake.apply", icon="MATERIAL")
         row.operator("detp_bake.revert", icon="LOOP_BACK")
         layout.operator("detp_bake.open_image", icon="IMAGE_DATA")
+
+    @staticmethod
+    def draw_running(layout, active):
+        """The running job: what it does, the photons and noise of the live preview, Stop and Keep."""
+        col = layout.column(align=True)
+        col.label(text=active.status(), icon="TIME")
+        if active.snapshot is not None:
+            noise = active.snapshot.noise
+            col.label(text=f"{active.snapshot.photons:,} photons" +
+                      (f" · noise {100 * noise:.2g} %" if noise is not None else ""))
+        row = layout.row()
+        row.scale_y = 1.5
+        if active.kind == "bake":
+            row.operator("detp_bake.stop", icon="PAUSE")
+        col.label(text="Esc cancels and restores the scene")
 
 
 class DETPBAKE_PT_photons(_Panel, bpy.types.Panel):
@@ -46,6 +66,9 @@ class DETPBAKE_PT_photons(_Panel, bpy.types.Panel):
         layout.prop(s, "seed")
         layout.prop(s, "threads")
         layout.prop(s, "denoise")
+        layout.prop(s, "live_preview")
+        if s.live_preview:
+            layout.prop(s, "live_preview_interval")
 
 
 class DETPBAKE_PT_estimator(_Panel, bpy.types.Panel):

@@ -1,79 +1,83 @@
 """Bake settings stored on the scene (`scene.detp_bake`) and on objects (`object.detp_bake`).
-The property names are part of the scripting API: scripts and tests use them."""
+The property names are part of the scripting API: scripts and tests use them. Defaults, limits
+and choices come from the core (BakeSettings, EstimatorSettings, the estimator registry), as the
+command line's do."""
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-ESTIMATORS = [
-    ("disc_index", "DETP: Disc Index", "Tangent-disc density estimation with the discs indexed in a BVH (fastest)"),
-    ("sphere_cache", "DETP: Sphere Cache", "Tangent-disc density estimation through Lastra's sphere cache"),
-    ("hybrid", "DETP: Hybrid", "For frame ranges: the static objects' discs indexed once for all frames, the "
-     "moving objects' texels by the sphere cache (or a disc index) every frame"),
-    ("detp", "DETP: Brute Force", "Every segment against every disc: slow, the reference the others match"),
-    ("photon_map", "Photon Map", "Jensen's k-nearest-neighbour photon map: noisy, darkens edges"),
-]
+from ..detp_bake import bake, estimators, images
+
+_B, _E = bake.BakeSettings, estimators.EstimatorSettings
+ESTIMATORS = [(n, estimators.get(n).label, estimators.get(n).description) for n in estimators.names()]
 
 
 class DETPBakeSettings(bpy.types.PropertyGroup):
-    estimator: EnumProperty(name="Estimator", items=ESTIMATORS, default="disc_index",
+    estimator: EnumProperty(name="Estimator", items=ESTIMATORS, default=_B.estimator,
                             description="Density estimator that turns photons into irradiance")
-    photons: IntProperty(name="Photons", default=1_000_000, min=1, max=1_000_000_000, soft_min=10_000,
+    photons: IntProperty(name="Photons", default=_B.photons, min=1, max=bake.MAX_PHOTONS, soft_min=10_000,
                          soft_max=50_000_000, description="Photons traced from the lights: more means less noise")
-    direct: EnumProperty(name="Direct Light", default="sampled",
+    direct: EnumProperty(name="Direct Light", default=_B.direct,
                          items=[("sampled", "Shadow Rays", "Direct light sampled with shadow rays at every texel; "
                                  "photons carry indirect light only (sharp shadows, least noise)"),
                                 ("photons", "Photons", "Photons carry direct light too and the estimator sees "
                                  "every segment (the paper's experiments)")],
                          description="How direct light is found")
-    direct_samples: IntProperty(name="Shadow Rays", default=16, min=1, max=4096, soft_max=256,
+    direct_samples: IntProperty(name="Shadow Rays", default=_B.direct_samples, min=1, max=bake.MAX_DIRECT_SAMPLES, soft_max=256,
                                 description="Shadow rays per texel for each light with extent (area, sphere, "
                                             "sun disc, sky, emissive meshes); point lights need one")
-    target_noise: FloatProperty(name="Noise Target", default=0.0, min=0.0, max=100.0, soft_max=10.0,
+    target_noise: FloatProperty(name="Noise Target", default=_B.target_noise, min=0.0, max=100.0, soft_max=10.0,
                                 subtype="PERCENTAGE",
                                 description="Stop tracing once every lightmap's relative noise is at most this "
                                             "(0: off); Photons is then the most to trace")
-    time_limit: FloatProperty(name="Time Limit", default=0.0, min=0.0, soft_max=3600.0, subtype="TIME_ABSOLUTE",
+    time_limit: FloatProperty(name="Time Limit", default=_B.time_limit, min=0.0, soft_max=3600.0, subtype="TIME_ABSOLUTE",
                               unit="TIME_ABSOLUTE",
                               description="Stop tracing before the bake has run this many seconds (0: off)")
-    denoise: BoolProperty(name="Denoise", default=True,
+    denoise: BoolProperty(name="Denoise", default=_B.denoise,
                           description="Denoise the lightmaps with Intel Open Image Denoise (chart-aware)")
-    bounces: IntProperty(name="Bounces", default=-1, min=-1, max=1024, soft_max=16,
+    bounces: IntProperty(name="Bounces", default=-1, min=-1, max=bake.MAX_BOUNCES, soft_max=16,
                          description="Diffuse bounces before a photon lands (-1: Cycles' Light Paths > Diffuse)")
-    seed: IntProperty(name="Seed", default=0, min=0, description="Random seed: the same seed gives the same lightmaps")
+    seed: IntProperty(name="Seed", default=_B.seed, min=0, description="Random seed: the same seed gives the same lightmaps")
     radius_mode: EnumProperty(name="Disc Radius", default="TEXELS",
                               items=[("TEXELS", "Texels", "Disc radius in texels of each object's lightmap"),
                                      ("WORLD", "World", "Disc radius in scene units (metres)")],
                               description="How the DETP disc radius is given")
-    radius_texels: FloatProperty(name="Radius", default=3.0, min=0.05, soft_max=8.0,
+    radius_texels: FloatProperty(name="Radius", default=estimators.RADIUS_TEXELS_INDIRECT, min=0.05, soft_max=8.0,
                                  description="DETP disc radius in texels: larger is smoother but blurrier")
     radius: FloatProperty(name="Radius", default=0.05, min=1e-5, subtype="DISTANCE", unit="LENGTH",
                           description="DETP disc radius in scene units")
-    k: IntProperty(name="Neighbours", default=100, min=2, soft_max=5000,
+    k: IntProperty(name="Neighbours", default=_E.k, min=2, soft_max=5000,
                    description="Photon map: hits per estimate; noise is about 1/sqrt(k)")
-    q: FloatProperty(name="Sphere Ratio", default=0.65, min=0.05, max=0.95,
+    q: FloatProperty(name="Sphere Ratio", default=_E.q, min=0.05, max=0.95,
                      description="Sphere cache: radius ratio of successive spheres (best near 0.6-0.7)")
     resolution_mode: EnumProperty(name="Size", default="FIXED",
                                   items=[("FIXED", "Resolution", "The same lightmap size for every object"),
                                          ("DENSITY", "Texel Density", "Lightmap size from each object's area")],
                                   description="How lightmap sizes are chosen")
-    resolution: IntProperty(name="Resolution", default=128, min=1, max=16384, soft_min=16, soft_max=4096,
+    resolution: IntProperty(name="Resolution", default=_B.resolution, min=1, max=bake.MAX_RESOLUTION, soft_min=16, soft_max=4096,
                             description="Lightmap width and height in pixels")
     texel_density: FloatProperty(name="Texels per Metre", default=32.0, min=0.01, soft_max=1024.0,
                                  description="Lightmap texels per metre of surface, when sizing by density")
-    margin: IntProperty(name="Margin", default=16, min=0, max=4096,
+    margin: IntProperty(name="Margin", default=_B.margin, min=0, max=4096,
                         description="Pixels of dilation around the UV charts, against seams under filtering")
     output_directory: StringProperty(name="Output", default="//lightmaps/", subtype="DIR_PATH",
                                      description="Folder for the lightmap files (// is the .blend's folder)")
-    formats: EnumProperty(name="Formats", options={"ENUM_FLAG"}, default={"EXR"},
+    formats: EnumProperty(name="Formats", options={"ENUM_FLAG"}, default={f.upper() for f in _B.formats},
                           items=[("EXR", "EXR", "32-bit float OpenEXR (the data)"),
                                  ("PNG", "PNG", "8-bit sRGB preview")],
                           description="Files written per object")
+    live_preview: BoolProperty(name="Live Preview", default=True,
+                               description="Show the lightmaps refining on the objects while the bake runs "
+                                           "(DETP estimators; Esc restores the materials)")
+    live_preview_interval: FloatProperty(name="Preview Every", default=1.0, min=0.1, soft_max=10.0,
+                                         subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE",
+                                         description="Seconds between live preview updates")
     apply_after_bake: BoolProperty(name="Apply After Bake", default=True,
                                    description="Show the lightmaps on the objects' materials when the bake ends")
-    threads: IntProperty(name="Threads", default=0, min=0, max=1024,
+    threads: IntProperty(name="Threads", default=_B.threads, min=0, max=1024,
                          description="Threads for tracing and estimation (0: the add-on preference, or all cores)")
     compare_estimators: EnumProperty(name="Compare", options={"ENUM_FLAG"},
-                                     default={"photon_map", "sphere_cache", "disc_index"},
+                                     default=set(estimators.compare_defaults()),
                                      items=ESTIMATORS, description="Estimators shown side by side by Compare")
     use_frame_range: BoolProperty(name="Frame Range", default=False,
                                   description="Bake every frame of a range: <object>.<estimator>.<frame>.exr, the "
@@ -91,7 +95,7 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
 
 class DETPBakeObjectSettings(bpy.types.PropertyGroup):
     include: BoolProperty(name="Include", default=True, description="Bake a lightmap for this object")
-    resolution: IntProperty(name="Resolution Override", default=0, min=0, max=16384,
+    resolution: IntProperty(name="Resolution Override", default=0, min=0, max=bake.MAX_RESOLUTION,
                             description="This object's lightmap size (0: use the scene setting)")
     uv_layer: StringProperty(name="Lightmap UV", default="Lightmap",
                              description="UV layer that holds this object's lightmap charts")

@@ -1,5 +1,7 @@
 """The Blender adapter, the only part of detp_bake that imports `bpy`: Blender data → `scene.Scene`
-(export), .blend files for the command line (files), the scene frame by frame (frames), baked images back into materials (lightmaps), lightmap UV layers (uv), and Cycles' own
+(export), .blend files for the command line (files), the scene frame by frame (frames), baked
+images back into materials (lightmaps), the lightmaps refining live while a job runs (preview),
+lightmap UV layers (uv), and Cycles' own
 bake as the reference (reference).
 
 Export reads the scene as F12 renders it (evaluation). Applying a lightmap adds a node frame named
@@ -11,11 +13,12 @@ from .evaluation import rendered_names
 from .export import export_scene, material_albedo_emission, scene_bounces
 from .files import open_blend, save_blend
 from .frames import frame_exporter, frame_kept
-from .lightmaps import apply_all, apply_lightmap, load_image, revert
+from .lightmaps import apply_all, apply_lightmap, load_image, revert, shared_materials
+from .preview import LivePreview
 from .reference import cycles_bake
 from .uv import ensure_lightmap_uv, remove_uv_layers, unwrap_into
 
 __all__ = ["DEFAULT_ALBEDO", "DEFAULT_UV", "FRAME_NAME", "REVERT_KEY", "export_scene", "material_albedo_emission",
-           "scene_bounces", "apply_all", "apply_lightmap", "load_image", "revert", "cycles_bake",
-           "ensure_lightmap_uv", "remove_uv_layers", "unwrap_into", "rendered_names", "open_blend", "save_blend",
-           "frame_exporter", "frame_kept"]
+           "scene_bounces", "apply_all", "shared_materials", "LivePreview", "apply_lightmap", "load_image", "revert",
+           "cycles_bake", "ensure_lightmap_uv", "remove_uv_layers", "unwrap_into", "rendered_names", "open_blend",
+           "save_blend", "frame_exporter", "frame_kept"]

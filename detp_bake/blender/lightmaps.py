@@ -168,13 +168,23 @@ def revert(obj) -> bool:
             mat = bpy.data.materials.get(original)
             if mat is not None and mat.node_tree:
                 _unwire(mat)
-    for _ in range(record.get("added_slots", 0)):
-        obj.data.materials.pop()
+    added = record.get("added_slots", 0)
+    if added and added == len(obj.data.materials):
+        obj.data.materials.clear()  # pop() leaves the object's slot count behind (Blender 4.5, 5.2)
+    else:
+        for _ in range(added):
+            obj.data.materials.pop()
     del obj[REVERT_KEY]
     img = bpy.data.images.get(record.get("image", ""))
     if img is not None and img.users == 0:
         bpy.data.images.remove(img)
     return True
+
+
+def shared_materials(obj, objects) -> set:
+    """Names of `obj`'s materials that another of `objects` also uses (those get copies)."""
+    others = {s.material.name for o in objects if o is not obj for s in o.material_slots if s.material}
+    return {s.material.name for s in obj.material_slots if s.material and s.material.name in others}
 
 
 def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional[dict] = None,
@@ -190,11 +200,6 @@ def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional
         obj = (objects or {}).get(name) or bl_scene.objects.get(name)
         if obj is not None:
             targets[name] = obj
-    users: dict = {}
-    for obj in targets.values():
-        for slot in obj.material_slots:
-            if slot.material is not None:
-                users.setdefault(slot.material.name, set()).add(obj.name)
     for name, obj in targets.items():
         exr = [p for p in files[name] if p.endswith(".exr")]
         if not exr:
@@ -202,7 +207,6 @@ def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional
         layer = uv_layer.get(name) if isinstance(uv_layer, dict) else uv_layer
         revert(obj)  # a new bake replaces the last one
         image = load_image(exr[0], f"{obj.name}.{estimator}", sequence=frames is not None)
-        shared = copy_materials or any(len(users.get(s.material.name, ())) > 1
-                                       for s in obj.material_slots if s.material)
+        shared = copy_materials or bool(shared_materials(obj, list(targets.values())))
         apply_lightmap(obj, image, layer or DEFAULT_UV, shared, frames)
     return list(targets.values())

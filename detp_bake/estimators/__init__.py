@@ -71,10 +71,21 @@ class Estimate:
     counters: dict = field(default_factory=dict)
 
 
+KERNELS = ("constant", "epanechnikov")
+
+
 class Estimator:
-    """Base class: subclasses set `name` and implement `add` and `finish`."""
+    """Base class: subclasses set `name` and implement `add` and `finish`. The class attributes
+    say what an estimator is and needs, so the pipeline, the memory estimate, the command line and
+    the panel ask it instead of naming estimators."""
     name = ""
+    label = ""  # the name people read (panel, help)
+    description = ""
     streaming = False  # True when `add` consumes a batch completely
+    discs = False  # DETP family: tangent discs, which need their radii, tangent clearance and a sun margin
+    stores_hits = False  # keeps every surface hit until `finish` (memory grows with the photons)
+    baseline = False  # Compare puts it first: the others are measured against it
+    compared = True  # in Compare's default set
     # Segments an estimator gathers before it works through them: the bake reads its sums (for the
     # noise estimate) no more often than that, so the reading costs no extra work.
     group_segments = 0
@@ -86,6 +97,12 @@ class Estimator:
         self.settings = settings
         self.progress = progress or (lambda fraction: None)
         self.context = context or Context()
+
+    @classmethod
+    def fixed_noise(cls, settings: EstimatorSettings) -> Optional[float]:
+        """Relative noise that does not fall with more photons (a noise target cannot be met), or
+        None when the noise falls with the photons and is measured from the batches."""
+        return None
 
     def add(self, batch: PhotonBatch) -> None:
         raise NotImplementedError
@@ -113,17 +130,34 @@ def register(cls: type[Estimator]) -> type[Estimator]:
 
 
 def names() -> list[str]:
+    """Every estimator, in the order the panel and the help list them."""
     _load_all()
     return list(REGISTRY)
 
 
-def create(name: str, texels: TexelSet, settings: EstimatorSettings,
-           progress: Optional[Callable[[float], None]] = None, context: Optional[Context] = None) -> Estimator:
+def get(name: str) -> type[Estimator]:
     _load_all()
     if name not in REGISTRY:
         raise BakeError(f"unknown estimator '{name}' (choose one of: {', '.join(REGISTRY)})")
-    return REGISTRY[name](texels, settings, progress, context)
+    return REGISTRY[name]
+
+
+def compare_order(chosen) -> list[str]:
+    """The estimators of `chosen` as Compare lays them out: the baseline first, then as listed."""
+    chosen = set(chosen)
+    return sorted((n for n in names() if n in chosen), key=lambda n: not REGISTRY[n].baseline)
+
+
+def compare_defaults() -> list[str]:
+    """Compare's default set."""
+    return compare_order(n for n in names() if REGISTRY[n].compared)
+
+
+def create(name: str, texels: TexelSet, settings: EstimatorSettings,
+           progress: Optional[Callable[[float], None]] = None, context: Optional[Context] = None) -> Estimator:
+    return get(name)(texels, settings, progress, context)
 
 
 def _load_all() -> None:
-    from . import detp, disc_index, hybrid, photon_map, sphere_cache  # noqa: F401  (they register themselves)
+    # They register themselves, in this order (the order of names()).
+    from . import disc_index, sphere_cache, hybrid, detp, photon_map  # noqa: F401

@@ -44,7 +44,11 @@ def _splat_all(o, w, length, flux, cen, nrm, rad, slab, eps, kernel, acc, hits):
 @register
 class BruteForceDETP(Estimator):
     name = "detp"
+    label = "DETP: Brute Force"
+    description = "Every segment against every disc: slow, the reference the others match"
     streaming = True
+    discs = True
+    compared = False  # far too slow beyond small scenes
 
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)

@@ -187,7 +187,10 @@ def _splat(o, w, length, flux, eps, kernel, node, left, item_first, item_count, 
 @register
 class DiscIndex(Estimator):
     name = "disc_index"
+    label = "DETP: Disc Index"
+    description = "Tangent-disc density estimation with the discs indexed in a BVH (fastest)"
     streaming = True
+    discs = True
 
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)

@@ -119,6 +119,3 @@ def crossing_weight(ox, oy, oz, wx, wy, wz, length, cx, cy, cz, nx, ny, nz, r, s
         return 2.0 * (1.0 - d2 / r2) / (np.pi * r2)
     return 1.0 / (np.pi * r2)
 
-
-def estimate_work(segments: int, discs: int) -> float:
-    return float(segments) * float(discs)

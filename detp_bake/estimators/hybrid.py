@@ -102,7 +102,12 @@ def _boxes(discs: Discs) -> tuple[np.ndarray, np.ndarray]:
 @register
 class Hybrid(Estimator):
     name = "hybrid"
+    label = "DETP: Hybrid"
+    description = ("For frame ranges: the static objects' discs indexed once for all frames, the moving objects' "
+                   "texels by the sphere cache (or a disc index) every frame")
     streaming = True
+    discs = True
+    compared = False  # one frame: disc_index's numbers at more cost
     group_segments = STREAM_SEGMENTS
     bytes_per_texel = max(DiscIndex.bytes_per_texel, SphereCache.bytes_per_texel)
 

@@ -21,6 +21,15 @@ CHUNK = 8192  # texels per k-NN query, bounds the (chunk, k, 3) gather
 @register
 class PhotonMap(Estimator):
     name = "photon_map"
+    label = "Photon Map"
+    description = "Jensen's k-nearest-neighbour photon map: noisy, darkens edges"
+    stores_hits = True
+    baseline = True
+
+    @classmethod
+    def fixed_noise(cls, settings):
+        """About 1/√(k − 1) whatever the photon count (DESIGN.md §2)."""
+        return 1.0 / float(np.sqrt(settings.k - 1))
 
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)

@@ -109,7 +109,10 @@ def _run(o, w, length, flux, eps, visit, edges, sc, sr, levels, radii,
 @register
 class SphereCache(Estimator):
     name = "sphere_cache"
+    label = "DETP: Sphere Cache"
+    description = "Tangent-disc density estimation through Lastra's sphere cache"
     streaming = True
+    discs = True
     group_segments = STREAM_SEGMENTS
 
     def __init__(self, texels, settings, progress=None, context=None):

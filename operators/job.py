@@ -1,0 +1,129 @@
+"""A core job (detp_bake/job.py) inside Blender: the main thread's half of it.
+
+`prepare` checks and exports the scene; the job then runs on its worker; `handle` reads its
+events on the main thread (progress for the status bar and the panel, the live preview written
+into the objects' images, warnings kept for the end); `finish` restores what the preview changed
+and applies the result, or removes the UV layers the export created. Both use the scene that was
+exported, whatever scene is current by then.
+"""
+import contextlib
+import time
+from dataclasses import replace
+
+import bpy
+
+from ..detp_bake import blender, images, job as job_mod
+from ..detp_bake.errors import BakeError
+from . import common
+
+
+class BlenderJob:
+    def __init__(self, context, names=None, preview=None):
+        """`names` None: a bake; a list: a comparison. `preview`: seconds between live previews
+        (None: the scene's setting; 0: none)."""
+        self.bl_scene = context.scene
+        s = self.bl_scene.detp_bake
+        self.kind = "bake" if names is None else "compare"
+        self.settings = common.bake_settings(context)
+        self.names = names
+        self.out_dir = common.output_directory(context)
+        self.objects = [o.name for o in common.bake_targets(context)]
+        self.preview_interval = (s.live_preview_interval if s.live_preview else 0.0) if preview is None else preview
+        if self.kind == "compare":
+            self.preview_interval = 0.0  # the comparison shows its own rows at the end
+        self.created_uv = []
+        self.messages = []  # the export's notes
+        self.warnings = []
+        self.job = None
+        self.preview = None
+        self.progress = None  # the last Progress event
+        self.snapshot = None  # the last Preview event (photons, noise), without its images
+        self.outcome = None
+        self.export_seconds = 0.0
+
+    def prepare(self, context) -> None:
+        """Check everything that can be checked, then export. Raises BakeError."""
+        busy = job_mod.busy_message()
+        if busy:
+            raise job_mod.JobBusy(busy)
+        for name in self.names or [self.settings.estimator]:
+            replace(self.settings, estimator=name).validate()
+        if not self.objects:
+            raise BakeError(f"nothing to {self.kind}: no visible mesh with 'Include' set in the scene")
+        s = self.bl_scene.detp_bake
+        if not s.output_directory.strip() or (s.output_directory.startswith("//") and not bpy.data.filepath):
+            raise BakeError("setting 'output_directory' is relative to the .blend: save the file first "
+                            "or choose an absolute folder")
+        images.check_writable_dir(self.out_dir)
+        t0 = time.perf_counter()
+        try:
+            scene = common.export(context, [self.bl_scene.objects[n] for n in self.objects],
+                                  self.messages.append, self.created_uv)
+        except BaseException:
+            blender.remove_uv_layers(self.bl_scene, self.created_uv)
+            raise
+        self.export_seconds = time.perf_counter() - t0
+        cluster = common.cluster(context)  # the preferences' Dask scheduler: connected by the job's worker
+        self.job = job_mod.Job(scene, self.settings, self.out_dir, self.names, export_seconds=self.export_seconds,
+                               preview=self.preview_interval,
+                               cluster=None if isinstance(cluster, contextlib.AbstractContextManager)
+                               and not hasattr(cluster, "client") else cluster)
+        if self.preview_interval > 0:
+            self.preview = blender.LivePreview(self.bl_scene, self.objects,
+                                               common.uv_layers([self.bl_scene.objects[n] for n in self.objects]))
+
+    def start(self) -> None:
+        self.job.start()
+
+    def handle(self, events) -> bool:
+        """Take in events on the main thread; True once the terminal one has come."""
+        for event in events:
+            if isinstance(event, job_mod.Progress):
+                self.progress = event
+            elif isinstance(event, job_mod.Preview):
+                self.snapshot = event
+                if self.preview is not None and not self.job.cancelling:
+                    self.preview.update(event.images)
+            elif isinstance(event, job_mod.Warning):
+                self.warnings.append(event.message)
+            elif isinstance(event, job_mod.TERMINAL):
+                self.outcome = event
+        return self.outcome is not None
+
+    def run(self) -> None:
+        """Synchronous (background mode, scripts): the events are handled as they come."""
+        for event in self.job.events():
+            self.handle([event])
+
+    def status(self) -> str:
+        """The status bar's line."""
+        if self.job.cancelling:
+            return "Cancelling…"
+        if self.job.thread is None and job_mod.warming():
+            return "Waiting for the kernels to compile (the first bake of this session only)"
+        text = self.progress.message if self.progress is not None else f"Starting the {self.kind}"
+        if self.progress is not None and self.progress.eta is not None:
+            text += f" · {self.progress.eta:.0f} s left"
+        if self.job.stopping:
+            text += " · stopping after this batch"
+        return text
+
+    def end(self) -> None:
+        """Undo the live preview (a finished bake applies its files afterwards) and free memory."""
+        if self.preview is not None:
+            self.preview.end()
+        job_mod.release_memory()
+
+    def restore(self) -> None:
+        """Nothing kept: the scene as it was before the job."""
+        self.end()
+        blender.remove_uv_layers(self.bl_scene, self.created_uv)
+
+    def failed(self, report) -> set:
+        """Report a job that ended without a result, restoring the scene; {'CANCELLED'}."""
+        self.restore()
+        if isinstance(self.outcome, job_mod.Error):
+            report({"ERROR"}, self.outcome.message)
+        else:
+            report({"WARNING"}, f"{self.kind.capitalize()} cancelled: nothing was written or changed")
+        return {"CANCELLED"}
