@@ -220,3 +220,51 @@ def test_classes_travel_by_their_core_name_from_blenders_package_path(monkeypatc
     back = pickle.loads(data)
     assert back["object"] is scene.BakeObject
     assert back["function"] is distributed.run_unit and back["run"] is distributed.run_unit
+
+
+def _free_port() -> int:
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_scheduler_and_workers_of_their_own_survive_a_killed_worker(tmp_path, bpy):
+    """`dask scheduler` and two `dask worker` processes started apart, the bake through the CLI's
+    --scheduler: one worker is killed (SIGKILL) while units run; the files are byte-identical to a
+    bake here, and report.json counts the units that ran again."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                               "--port", str(port), "--no-dashboard"], **quiet)]
+    try:
+        for k in range(2):
+            procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                                           "--nthreads", "1", "--no-nanny", "--no-dashboard", "--name", f"w{k}"],
+                                          **quiet))
+        args = [sys.executable, "-m", "detp_bake", "bake", str(CORNELL), "--objects", "Floor", "TallBox",
+                "--photons", "2000000", "--resolution", "16", "--no-denoise", "--connect-timeout", "60"]
+        here = subprocess.run(args + ["--out", str(tmp_path / "here")], env=env, capture_output=True, text=True)
+        assert here.returncode == 0, here.stderr
+        far = subprocess.Popen(args + ["--out", str(tmp_path / "far"), "--scheduler", address], env=env,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        err = []
+        for line in far.stderr:  # the first traced units are in: the others are running
+            err.append(line)
+            if "Tracing" in line:
+                procs[1].send_signal(signal.SIGKILL)
+                break
+        rest, more = far.communicate(timeout=300)
+        assert far.returncode == 0, "".join(err) + more
+        assert procs[1].wait(timeout=10) == -signal.SIGKILL
+        for name in ("Floor.disc_index.exr", "TallBox.disc_index.exr"):
+            assert (tmp_path / "here" / name).read_bytes() == (tmp_path / "far" / name).read_bytes()
+        report = json.loads((tmp_path / "far" / "report.json").read_text())
+        assert report["cluster"]["address"] == address and report["cluster"]["resubmitted"] >= 1, report["cluster"]
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.terminate()
+                p.wait(timeout=30)
