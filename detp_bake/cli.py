@@ -193,44 +193,38 @@ def _check_cancel(cancel) -> None:
 
 
 def _run_job(job: job_mod.Job, cancel=None, said=()) -> job_mod.Result:
-    """Run a job to its end, its progress and warnings on stderr (but those in `said`, which the
-    command line has said already); `cancel()` true (a signal, interrupt.py) cancels it."""
+    """Run a job to its end, its progress and warnings on stderr as the worker sends them (but the
+    warnings in `said`, which the command line has said already, and nothing once cancelled);
+    `cancel()` true (a signal, interrupt.py) cancels it."""
     progress = StderrProgress()
     said = set(said)
 
-    def events():  # as they come; a signal is seen within 0.1 s even while no event comes
-        job.start()
-        while True:
-            got = job.poll()
-            if not got:
-                if cancel is not None and cancel() and not job.cancelling:
-                    job.cancel()
-                time.sleep(0.1)
-            for event in got:
-                yield event
-                if isinstance(event, job_mod.TERMINAL):
-                    return
+    def tell(event):  # on the worker thread: in order with what the worker itself prints
+        if job.cancelling or (cancel is not None and cancel()):
+            return
+        if isinstance(event, job_mod.Progress):
+            progress(event)
+        elif isinstance(event, job_mod.Warning) and event.message not in said:
+            _log(f"warning: {event.message}")
 
+    job.listener = tell
+    job.start()
     try:
-        for event in events():
-            if isinstance(event, job_mod.Progress):
-                progress(event)
-            elif isinstance(event, job_mod.Warning):
-                if event.message not in said:
-                    _log(f"warning: {event.message}")
-            elif isinstance(event, job_mod.Error):
-                raise BakeError(event.message)
-            elif isinstance(event, job_mod.Cancelled):
-                raise BakeCancelled()
-            elif isinstance(event, job_mod.Result):
-                return event
+        while True:
+            for event in job.poll():
+                if isinstance(event, job_mod.Error):
+                    raise BakeError(event.message)
+                if isinstance(event, job_mod.Cancelled):
+                    raise BakeCancelled()
+                if isinstance(event, job_mod.Result):
+                    return event
             if cancel is not None and cancel() and not job.cancelling:
                 job.cancel()  # the worker stops within a batch and removes what it staged
+            time.sleep(0.05)
     except KeyboardInterrupt:
         job.cancel()
-        job.thread.join()  # the worker stops within a batch and removes what it staged
+        job.thread.join()
         raise BakeCancelled() from None
-    raise BakeError("the job ended without a result")
 
 
 def run_compare(args, bl_scene=None, cancel=None) -> dict:

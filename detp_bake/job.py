@@ -158,10 +158,12 @@ class Job:
     the same photons (the first is the reference). `out_dir` None computes only. `preview`
     seconds > 0: a Preview event at most that often while tracing (DETP estimators; the photon
     map has nothing to show before its gather). `warnings`: what the front end found before the
-    job (they go into report.json too). `cluster`: a distributed.Cluster to trace on."""
+    job (they go into report.json too). `cluster`: a distributed.Cluster to trace on. `listener`
+    sees every event on the worker thread as it is sent, in order with anything the worker prints
+    (a command line's stderr), before the front end's own read of the queue."""
 
     def __init__(self, scene, settings: bake_mod.BakeSettings, out_dir=None, names=None, *,
-                 export_seconds: float = 0.0, preview: float = 0.0, warnings=(), cluster=None):
+                 export_seconds: float = 0.0, preview: float = 0.0, warnings=(), cluster=None, listener=None):
         self.kind = "bake" if names is None else "compare"
         self.names = [settings.estimator] if names is None else list(dict.fromkeys(names))
         self.scene = scene
@@ -170,6 +172,7 @@ class Job:
         self.export_seconds = export_seconds
         self.preview_interval = float(preview)
         self._warnings = list(warnings)
+        self.listener = listener
         self.cluster = cluster
         self._events: "queue.Queue[Event]" = queue.Queue()
         self._cancel = threading.Event()
@@ -242,6 +245,8 @@ class Job:
 
     # The worker's side ----------------------------------------------------------------------
     def _send(self, event: Event) -> None:
+        if self.listener is not None:
+            self.listener(event)
         self._events.put(event)
 
     def _progress(self, p: bake_mod.Progress) -> None:
