@@ -94,9 +94,3 @@ def warn_stale(out_dir: Path, result, warn) -> None:
         warn(f"{len(stale)} lightmaps in {out_dir} from an older bake of the same objects are left as they "
              f"were (not written this time): {', '.join(stale[:8])}{' …' if len(stale) > 8 else ''}")
 
-
-def gather_warnings(result, warn) -> None:
-    """The bake's own warnings said too; the result (report.json) then holds all of them."""
-    for w in result.warnings:
-        warn(w)
-    result.warnings = list(warn)

@@ -16,11 +16,8 @@ class BakeJob(BlenderJob):
 
     def finish(self, report) -> set:
         """Apply the result (main thread) or undo the export's changes; returns operator status."""
-        for msg in self.messages:
-            report({"INFO"}, msg)
-        if not isinstance(self.outcome, job_mod.Result):
+        if not self.succeeded(report):
             return self.failed(report)
-        self.end()
         r = self.outcome.results[self.settings.estimator]
         scene = self.bl_scene
         s = scene.detp_bake

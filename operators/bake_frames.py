@@ -64,11 +64,9 @@ class FramesBlenderJob(BakeJob):
                                      moving=moving, static=static, export_seconds=self.export_seconds)
 
     def finish(self, report) -> set:
-        for msg in self.messages + (self.job.notes if self.job is not None else []):
-            report({"INFO"}, msg)
-        if not isinstance(self.outcome, job_mod.Result):
+        self.messages += self.job.notes if self.job is not None else []  # which objects move, frames kept
+        if not self.succeeded(report):
             return self.failed(report)
-        self.end()
         r = self.outcome.frames
         scene = self.bl_scene
         if scene.detp_bake.apply_after_bake and "exr" in self.settings.formats and self.frame_range.step == 1:

@@ -7,7 +7,7 @@ import numpy as np
 from bpy.props import EnumProperty
 from mathutils import Matrix
 
-from ..detp_bake import blender, estimators, job as job_mod
+from ..detp_bake import blender, estimators
 from ..ui.properties import ESTIMATORS
 from . import common
 from .bake import JobOperator
@@ -41,11 +41,8 @@ class CompareJob(BlenderJob):
     """A comparison: its finish lays the estimators' lightmaps out side by side."""
 
     def finish(self, report) -> set:
-        for msg in self.messages:
-            report({"INFO"}, msg)
-        if not isinstance(self.outcome, job_mod.Result):
+        if not self.succeeded(report):
             return self.failed(report)
-        self.end()
         scene = self.bl_scene
         objects = [scene.objects[n] for n in self.objects if n in scene.objects]
         summary = self.outcome.comparison

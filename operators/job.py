@@ -119,6 +119,16 @@ class BlenderJob:
         self.end()
         blender.remove_uv_layers(self.bl_scene, self.created_uv)
 
+    def succeeded(self, report) -> bool:
+        """Say the export's notes; True, with the live preview undone, when the job has a result
+        (a finish then applies it), False when it has none (a finish then returns `failed`)."""
+        for msg in self.messages:
+            report({"INFO"}, msg)
+        if not isinstance(self.outcome, job_mod.Result):
+            return False
+        self.end()
+        return True
+
     def failed(self, report) -> set:
         """Report a job that ended without a result, restoring the scene; {'CANCELLED'}."""
         self.restore()
