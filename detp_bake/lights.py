@@ -199,18 +199,16 @@ def spot_emitter(light: SpotLight) -> Emitter:
 
 @jit
 def _emit_parallel(key, first, n, frame, cos_max, centre, radius, flux, o, d, f, rng):
-    """Sun (cos_max ≤ 1: directions within acos(cos_max) of the frame's axis) or world (cos_max
-    < −1: any direction). Photons start on a disc of the scene's bounding radius perpendicular to
-    their own direction, 2 radii out, which keeps the irradiance uniform."""
+    """A sun over a scene without triangles: directions within acos(cos_max) of the frame's axis,
+    starting on a disc of the scene's bounding radius perpendicular to their own direction, 2
+    radii out, which keeps the irradiance uniform. (Sky photons: footprint.emit_sky.)"""
     buf, state = _block()
     for a in range(0, n, BLOCK):
         b = min(n, a + BLOCK)
         for i in range(a, b):
             k = i - a
             r, u0, u1, u2, u3 = _draw4(key, first + i)
-            if cos_max < -1.0:
-                dx, dy, dz = uniform_sphere(u2, u3)
-            elif cos_max < 1.0:
+            if cos_max < 1.0:
                 lx, ly, lz = cone_lobe(cos_max, u2, u3)
                 dx, dy, dz = in_frame(lx, ly, lz, frame[0], frame[1], frame[2])
             else:
