@@ -20,7 +20,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from . import __version__, denoise as denoise_mod, direct as direct_mod, estimators, images, interrupt, memory, \
-    staging, texels as texels_mod
+    sites as sites_mod, staging, texels as texels_mod
 from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
@@ -34,6 +34,8 @@ MAX_RESOLUTION = 16384
 MAX_BOUNCES = 1024
 DIRECT_MODES = ("sampled", "photons")
 MAX_DIRECT_SAMPLES = 4096
+MAX_SPACING = 8
+AUTO_SPACING = 2
 
 
 @dataclass
@@ -59,6 +61,10 @@ class BakeSettings:
     time_limit: float = 0.0
     denoise: bool = True  # OIDN on every lightmap (chart-aware; denoise.py), when pyoidn is installed
     keep_raw: bool = False  # also write the lightmaps as they were before denoising (<name>.<estimator>.raw.exr)
+    # Texels between the sites where the estimator runs (sites.py): 0 is automatic (2 with sampled
+    # direct light, whose indirect part is smooth; 1, every texel, in the paper's mode and in frame
+    # ranges). The texels between sites blend their neighbouring sites.
+    indirect_spacing: int = 0
     estimator_settings: EstimatorSettings = field(default_factory=EstimatorSettings)
 
     def validate(self) -> None:
@@ -83,6 +89,11 @@ class BakeSettings:
         unknown = [f for f in self.formats if f not in images.WRITERS]
         if unknown or not self.formats:
             bad("formats", self.formats, f"choose from {', '.join(images.WRITERS)}")
+        if not isinstance(self.indirect_spacing, (int, np.integer)) or not 0 <= self.indirect_spacing <= MAX_SPACING:
+            bad("indirect_spacing", self.indirect_spacing, f"must be 0 (automatic) or 1 to {MAX_SPACING} texels")
+        if self.indirect_spacing > 1 and self.direct != "sampled":
+            bad("indirect_spacing", self.indirect_spacing, "needs direct='sampled': with direct='photons' the estimator "
+                "sees direct light too, whose shadow edges blending between sites would blur")
         if self.threads < 0:
             bad("threads", self.threads, "must be 0 (all cores) or more")
         if self.batch_size < 1:
@@ -256,11 +267,13 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     need = _check_memory(scene, settings, names, batch_size, per_photon, per_photon_kept)
     t0 = time.perf_counter()
     texels = texels_mod.rasterise(scene)
+    sites = sites_mod.choose(texels, indirect_spacing(settings, frame_state))
+    at = sites.texels  # where the estimators run
     rasterise_seconds = time.perf_counter() - t0
     # DETP discs reach past a surface's edge by their radius and count what passes there: sun
     # photons must start that far beyond the footprint of the geometry too.
     discs = any(estimators.get(name).discs for name in names)
-    radius = disc_radius(texels, settings.estimator_settings) if discs else None
+    radius = disc_radius(at, settings.estimator_settings) if discs else None
     reach = float(np.max(radius)) if discs and len(texels) else 0.0
     caster = RayCaster(scene.positions)
     tracer = PhotonTracer(scene, settings.photons, bounces, settings.seed, batch_size, settings.threads,
@@ -290,8 +303,8 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     t0 = time.perf_counter()
     if discs:
         report(Progress("prepare", 0.0, "Measuring disc clearance"))
-        clearance = texels_mod.tangent_clearance(texels, scene.positions, radius, 0.5 * SLAB * radius)
-        rise = own_surface_rise(texels, scene, radius)
+        clearance = texels_mod.tangent_clearance(at, scene.positions, radius, 0.5 * SLAB * radius)
+        rise = own_surface_rise(at, scene, radius)
     clearance_seconds = time.perf_counter() - t0
     context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
                                  clearance=clearance, rise=rise, frames=frame_state)
@@ -299,11 +312,12 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     for name in names:
         report(Progress("prepare", 0.5, f"Preparing {name}"))
         t1 = time.perf_counter()
-        runs[name] = estimators.create(name, texels, settings.estimator_settings, estimate_progress, context)
+        runs[name] = estimators.create(name, at, settings.estimator_settings, estimate_progress, context)
         build[name] = time.perf_counter() - t1
     spent = {name: 0.0 for name in names}
     # Noise from the spread between blocks of batches, for the estimators that stream.
-    noise = {name: BatchNoise(len(texels)) for name, est in runs.items() if est.streaming}
+    noise = {name: BatchNoise(len(at)) for name, est in runs.items() if est.streaming}
+    direct_at = None if direct_e is None else sites.of_sites(direct_e)
     blocks = _blocks(tracer, runs, expected_segments)
     primary = names[0]
     total = tracer.photons
@@ -325,8 +339,8 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
             return bool(settings.time_limit) and time.perf_counter() - t_start + batch_seconds > settings.time_limit
         partials = (trace_batches(tracer, runs, block, cancelled, over_time) for block in blocks)
     else:  # the same runs of batches on a cluster's workers (distributed.py), in batch order
-        job = TraceJob(scene, texels, settings, names, bounces, batch_size, reach, context)
-        partials = cluster.partials(job, blocks, cancelled, trace_progress, _worker_bytes(need, texels, runs, blocks))
+        job = TraceJob(scene, at, settings, names, bounces, batch_size, reach, context)
+        partials = cluster.partials(job, blocks, cancelled, trace_progress, _worker_bytes(need, at, runs, blocks))
     with contextlib.closing(iter(partials)) as partials:
         for part in partials:
             totals.add(part)
@@ -334,15 +348,15 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
             for name in noise:
                 noise[name].update(totals.sums[name]["irradiance"], share)
             if primary in noise and noise[primary].groups >= 2:
-                direct_now = 0.0 if direct_e is None else direct_e
-                current = noise[primary].relative(texels.lightmaps, direct_now + noise[primary].previous[:, None] /
+                direct_now = 0.0 if direct_at is None else direct_at
+                current = noise[primary].relative(at.lightmaps, direct_now + noise[primary].previous[:, None] /
                                                   max(share, 1e-300))
             trace_progress(totals.stats.photons)
             if cancelled():
                 raise BakeCancelled()
             if preview is not None and runs[primary].streaming:
                 preview(Snapshot(primary, totals.stats.photons, share, max(current.values(), default=None), texels,
-                                 partial(_snapshot_value, totals.sums[primary]["irradiance"], direct_e, share)))
+                                 partial(_snapshot_value, sites, totals.sums[primary]["irradiance"], direct_e, share)))
             if stop is not None and totals.batches < tracer.batch_count and stop():
                 stopped_by = "user"
                 break
@@ -366,6 +380,8 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
         out = est.finish()
         if share < 1.0:  # stopped early: the batches so far stand for the whole bake
             out.irradiance = out.irradiance / share
+        if sites.spacing > 1:
+            out.irradiance = sites.expand(out.irradiance)
         spent[name] += time.perf_counter() - t1
         seconds = {"rasterise": rasterise_seconds, "direct": direct_info.get("seconds", 0.0),
                    "clearance": clearance_seconds, "build": build[name], "trace": tracer.stats.seconds,
@@ -380,12 +396,14 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
                          "parts_mb": {k: round(v / 1e6, 1) for k, v in need.parts.items()},
                          "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": batch_size}
         if name in noise:
-            result.noise = noise[name].relative(texels.lightmaps, result.value * np.pi)
+            result.noise = noise[name].relative(at.lightmaps, sites.of_sites(result.value) * np.pi)
         elif runs[name].fixed_noise(settings.estimator_settings) is not None:
             fixed = runs[name].fixed_noise(settings.estimator_settings)
             result.noise = {lm.name: fixed for lm in texels.lightmaps}
-        result.warnings.extend(layout_warnings(texels, settings.estimator_settings,
+        result.warnings.extend(layout_warnings(at, settings.estimator_settings,
                                                radius if runs[name].discs else None))
+        result.direct["indirect_spacing"] = sites.spacing
+        result.direct["indirect_sites"] = len(at)
         k = settings.estimator_settings.k
         if runs[name].stores_hits and result.counters.get("hits", k) < k:
             result.warnings.append(f"setting 'k' = {k} is more than the {result.counters['hits']:,} photons the "
@@ -550,8 +568,18 @@ def layout_warnings(texels, estimator_settings, radius=None) -> list:
     return out
 
 
-def _snapshot_value(irradiance, direct_e, share) -> np.ndarray:
+def indirect_spacing(settings: BakeSettings, frame_state=None) -> int:
+    """The sites' spacing (sites.py): the setting, else 2 for sampled direct light; always 1 in the
+    paper's mode (the estimator then sees direct light, which is not smooth) and in frame ranges."""
+    if settings.direct != "sampled" or frame_state is not None:
+        return 1
+    return int(settings.indirect_spacing) or AUTO_SPACING
+
+
+def _snapshot_value(sites, irradiance, direct_e, share) -> np.ndarray:
     irradiance = irradiance / share
+    if sites.spacing > 1:
+        irradiance = sites.expand(irradiance)
     return (irradiance if direct_e is None else irradiance + direct_e) / np.pi
 
 

@@ -57,6 +57,9 @@ def _bake_arguments(b, with_scene_path):
                         "photons: the estimator sees every segment (the paper's experiments)")
     b.add_argument("--direct-samples", type=int, default=_B.direct_samples,
                    help="shadow rays per texel for each light with extent (default %(default)s)")
+    b.add_argument("--indirect-spacing", type=int, default=_B.indirect_spacing, metavar="TEXELS",
+                   help="with --direct sampled: estimate indirect light every this many texels and blend between "
+                        f"(0: automatic, {bake_mod.AUTO_SPACING}; 1: every texel)")
     b.add_argument("--k", type=int, default=_E.k, help="photon map neighbours (default %(default)s)")
     b.add_argument("--radius-texels", type=float, default=_E.radius_texels,
                    help=f"DETP disc radius in texels (default {estimators.RADIUS_TEXELS_INDIRECT:g} with --direct "
@@ -107,7 +110,7 @@ def settings_from_args(args) -> bake_mod.BakeSettings:
     return bake_mod.BakeSettings(
         estimator=args.estimator, photons=_photons(args), bounces=args.bounces, seed=args.seed,
         target_noise=args.target_noise, time_limit=args.time_limit, denoise=args.denoise, keep_raw=args.keep_raw,
-        direct=args.direct, direct_samples=args.direct_samples,
+        direct=args.direct, direct_samples=args.direct_samples, indirect_spacing=args.indirect_spacing,
         resolution=args.resolution, margin=args.margin, formats=formats, half=args.half,
         threads=args.threads,
         estimator_settings=EstimatorSettings(k=args.k, radius_texels=args.radius_texels,

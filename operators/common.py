@@ -29,7 +29,8 @@ def bake_settings(context, estimator=None) -> BakeSettings:
     threads = s.threads or (prefs.threads if prefs is not None else 0)
     return BakeSettings(
         estimator=estimator or s.estimator, photons=s.photons, bounces=None if s.bounces < 0 else s.bounces,
-        direct=s.direct, direct_samples=s.direct_samples, denoise=s.denoise,
+        direct=s.direct, direct_samples=s.direct_samples, indirect_spacing=s.indirect_spacing if s.direct == "sampled" else 0,
+        denoise=s.denoise,
         target_noise=s.target_noise, time_limit=s.time_limit,
         seed=s.seed, resolution=s.resolution, margin=s.margin,
         formats=tuple(f.lower() for f in sorted(s.formats)) or ("exr",), threads=threads,

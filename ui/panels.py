@@ -59,6 +59,7 @@ class DETPBAKE_PT_photons(_Panel, bpy.types.Panel):
         layout.prop(s, "direct")
         if s.direct == "sampled":
             layout.prop(s, "direct_samples")
+            layout.prop(s, "indirect_spacing")
         layout.prop(s, "photons")
         layout.prop(s, "target_noise")
         layout.prop(s, "time_limit")

@@ -26,6 +26,10 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
     direct_samples: IntProperty(name="Shadow Rays", default=_B.direct_samples, min=1, max=bake.MAX_DIRECT_SAMPLES, soft_max=256,
                                 description="Shadow rays per texel for each light with extent (area, sphere, "
                                             "sun disc, sky, emissive meshes); point lights need one")
+    indirect_spacing: IntProperty(name="Indirect Spacing", default=_B.indirect_spacing, min=0, max=bake.MAX_SPACING,
+                                  description="Estimate indirect light every this many texels and blend between "
+                                              f"them (0: automatic, {bake.AUTO_SPACING}; 1: every texel). Indirect "
+                                              "light is smooth: fewer sites cost less for the same noise")
     target_noise: FloatProperty(name="Noise Target", default=_B.target_noise, min=0.0, max=100.0, soft_max=10.0,
                                 subtype="PERCENTAGE",
                                 description="Stop tracing once every lightmap's relative noise is at most this "
