@@ -150,13 +150,18 @@ def previous_report(out_dir) -> Optional[dict]:
     return doc
 
 
-def _entries(doc: Optional[dict]) -> dict:
+def _entries(doc: Optional[dict], out_dir) -> dict:
+    """{object: its entry} of an earlier report, its files taken in `out_dir` (a folder copied
+    elsewhere keeps the paths of the first one), those with a key and all their files only."""
     if doc is None:
         return {}
+    folder = Path(out_dir).resolve()
     out = {}
     for entry in list(doc.get("earlier_objects", [])) + list(doc["objects"]):
         if isinstance(entry, dict) and entry.get("key") and entry.get("files"):
-            out[entry["name"]] = entry
+            files = [str(folder / Path(f).name) for f in entry["files"]]
+            if all(os.path.isfile(f) for f in files):
+                out[entry["name"]] = {**entry, "files": files}
     return out
 
 
@@ -170,14 +175,13 @@ def plan(scene: Scene, settings, out_dir, force: bool = False) -> Plan:
     if not reusable(settings):
         return result
     result.previous = previous_report(out_dir)
-    entries = _entries(result.previous)
-    result.earlier = [e for name, e in entries.items() if name not in result.keys
-                      and all(os.path.isfile(f) for f in e["files"])]
+    entries = _entries(result.previous, out_dir)
+    result.earlier = [e for name, e in entries.items() if name not in result.keys]
     if force:
         return result
     for name in names:
         entry = entries.get(name)
-        if entry is not None and entry["key"] == result.keys[name] and all(os.path.isfile(f) for f in entry["files"]):
+        if entry is not None and entry["key"] == result.keys[name]:
             result.reused[name] = entry
     result.bake = [n for n in names if n not in result.reused]
     return result

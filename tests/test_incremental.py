@@ -3,6 +3,8 @@ on which other objects are baked with it (checked bit for bit, estimator by esti
 objects whose inputs are unchanged keep their files and only the others are estimated."""
 import json
 import os
+import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -164,3 +166,9 @@ def test_objects_left_out_of_a_bake_are_remembered_for_the_next(tmp_path):
     assert sorted(e["name"] for e in report["earlier_objects"]) == ["Back", "Plate"]
     got = bake(scene(), out)
     assert got.results == {} and sorted(got.reused) == sorted(ALL)
+    # A copy of the folder reuses its own files, not those where report.json was written.
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    got = bake(scene(), copy)
+    assert sorted(got.reused) == sorted(ALL)
+    assert all(Path(f).parent == copy.resolve() for files in got.reused.values() for f in files)
