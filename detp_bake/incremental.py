@@ -11,7 +11,7 @@ itself (its lightmap UVs and resolution), but not on which other objects are bak
     batch order; disc clearance and rise look at the scene's triangles, not at other texels;
   - sampled direct light: a texel's shadow rays are keyed by its object and pixel (direct.py);
   - denoising and dilation work on one lightmap at a time.
-Two things do depend on the others, and are in the key or stop reuse:
+Three things do depend on the others, and are in the key or stop reuse:
   - with a sun or a sky, their photons start the widest disc of the bake beyond the geometry
     (bake.disc_reach): the key holds that reach, and a bake that reuses some objects starts them
     as far out as the whole set would;
