@@ -1,10 +1,11 @@
 """The paper's quasi-static claim: over a frame range, the hybrid (static discs indexed once, moving
 texels by the sphere cache) against disc_index and sphere_cache rebuilt every frame.
 
-    python benchmarks/frames.py [--frames 1-24] [--photons 500000] [--resolution 64]
-                                [--radius-texels 1.5 4] [--direct photons] [--out DIR]
+    python benchmarks/frames.py [--scene quasi_static | patio_cart] [--frames 1-24] [--photons 500000]
+                                [--resolution 64] [--radius-texels 1.5 4] [--direct photons] [--out DIR]
 
-Every frame of sample_scenes/quasi_static.blend is exported through the Blender adapter and its
+Every frame of sample_scenes/quasi_static.blend (or of the patio with a cart crossing it, built in
+memory by sample_scenes/make_patio_cart.py) is exported through the Blender adapter and its
 photons go to the three estimators at once (bake.compute_many), so they see the same segments; each
 estimator's time is its build (index, discs, sphere levels) plus its estimation, per frame. Prints a
 table per disc radius and writes frames.json into --out (default benchmarks/results/). One run:
@@ -29,11 +30,16 @@ NAMES = ("hybrid", "disc_index", "sphere_cache")
 COLUMNS = ("hybrid", "hybrid_di", "disc_index", "sphere_cache")  # hybrid_di: moving texels by a disc index
 
 
-def frame_scenes(frames, resolution):
+def frame_scenes(frames, resolution, name="quasi_static"):
     import bpy
     from detp_bake.blender import frame_exporter
 
-    bpy.ops.wm.open_mainfile(filepath=str(scenes.SAMPLES / "quasi_static.blend"))
+    if name == "patio_cart":  # not kept as a .blend: built here
+        sys.path.insert(0, str(scenes.SAMPLES))
+        import make_patio_cart
+        make_patio_cart.build_patio_cart()
+    else:
+        bpy.ops.wm.open_mainfile(filepath=str(scenes.SAMPLES / f"{name}.blend"))
     scene_at = frame_exporter(bpy.context.scene, None, None, resolution, log=lambda msg: None)
     return {f: scene_at(f) for f in frames}
 
@@ -67,6 +73,7 @@ def run(scenes_by_frame, radius_texels, args):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--scene", default="quasi_static", choices=("quasi_static", "patio_cart"))
     p.add_argument("--frames", default="1-24")
     p.add_argument("--photons", type=int, default=500_000)
     p.add_argument("--resolution", type=int, default=64)
@@ -78,7 +85,7 @@ def main(argv=None):
     p.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = p.parse_args(argv)
     frames = parse_frames(args.frames).frames()
-    by_frame = frame_scenes(frames, args.resolution)
+    by_frame = frame_scenes(frames, args.resolution, args.scene)
     # Warm numba's caches so the first frame is not a compile.
     warm = next(iter(by_frame.values()))
     for moving in ("sphere_cache", "disc_index"):
@@ -86,12 +93,12 @@ def main(argv=None):
                                                           estimator_settings=EstimatorSettings(hybrid_moving=moving)),
                               NAMES, frame_state=FrameState(moving=frozenset(warm.objects[-1:] and
                                                                              [warm.objects[-1].name])))
-    out = {"scene": "quasi_static", "photons": args.photons, "resolution": args.resolution, "direct": args.direct,
+    out = {"scene": args.scene, "photons": args.photons, "resolution": args.resolution, "direct": args.direct,
            "runs": []}
     for r in args.radius_texels:
         print(f"discs of {r} texels:", flush=True)
         out["runs"].append(run(by_frame, r, args))
-    print(f"\nquasi_static, {len(frames)} frames, {args.photons:,} photons per frame, {args.resolution}² lightmaps, "
+    print(f"\n{args.scene}, {len(frames)} frames, {args.photons:,} photons per frame, {args.resolution}² lightmaps, "
           f"direct {args.direct}; seconds of build + estimation over the range (tracing is shared)")
     print("| disc radius | hybrid (sphere cache for movers) | hybrid (disc index for movers) | disc_index | "
           "sphere_cache | best hybrid / best other |")
@@ -103,8 +110,9 @@ def main(argv=None):
               f"{t['sphere_cache']:.2f} | {min(t['hybrid'], t['hybrid_di']) / best:.2f} |")
     target = Path(args.out)
     target.mkdir(parents=True, exist_ok=True)
-    (target / "frames.json").write_text(json.dumps(out, indent=2))
-    print(target / "frames.json")
+    name = "frames.json" if args.scene == "quasi_static" else f"frames_{args.scene}.json"
+    (target / name).write_text(json.dumps(out, indent=2))
+    print(target / name)
 
 
 if __name__ == "__main__":

@@ -151,6 +151,12 @@ class BakeResult:
     warnings: list = field(default_factory=list)
     stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit, user (Stop and keep)
     share: float = 1.0  # the share of the photons traced (less than 1 when stopped early)
+    # A bake into a folder with an earlier one (incremental.py): each baked object's key, the
+    # objects whose earlier lightmaps were kept (name -> that bake's report entry), and the entries
+    # of objects not in this bake whose files are still there.
+    keys: dict = field(default_factory=dict)
+    reused: dict = field(default_factory=dict)
+    earlier: list = field(default_factory=list)
 
     def report(self) -> dict:
         st = self.stats
@@ -161,8 +167,11 @@ class BakeResult:
             "version": __version__,
             "settings": settings,
             "objects": [{"name": lm.name, "resolution": [lm.width, lm.height], "texels": lm.count,
-                         "texel_size": lm.texel_size, "files": self.files.get(lm.name, [])}
-                        for lm in self.texels.lightmaps],
+                         "texel_size": lm.texel_size, "files": self.files.get(lm.name, []),
+                         **({"key": self.keys[lm.name], "reused": False} if lm.name in self.keys else {})}
+                        for lm in self.texels.lightmaps] + [{**entry, "reused": True} for entry in self.reused.values()],
+            **({"reused": list(self.reused)} if self.keys else {}),
+            **({"earlier_objects": self.earlier} if self.earlier else {}),
             "photons": st.photons,
             "segments": st.segments,
             "hits": st.hits,
@@ -215,17 +224,20 @@ def _cancel_fn(cancel) -> Callable[[], bool]:
 
 
 def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[Progress], None]] = None,
-            cancel=None, cluster=None, frame_state: Optional[estimators.FrameState] = None) -> BakeResult:
+            cancel=None, cluster=None, frame_state: Optional[estimators.FrameState] = None,
+            reach_of=None) -> BakeResult:
     """Trace, estimate and dilate; nothing touches the disk. Raises BakeError or BakeCancelled.
     `cluster` (a distributed.Cluster) traces the photons on its workers instead of here.
-    `frame_state`: one frame of a range (frames.py), shared by the range's frames."""
+    `frame_state`: one frame of a range (frames.py), shared by the range's frames. `reach_of`:
+    objects whose discs also set how far out sun and sky photons start (`disc_reach`), as if they
+    were baked too (incremental.py: a bake that reuses their lightmaps)."""
     return compute_many(scene, settings, [settings.estimator], progress, cancel, cluster,
-                        frame_state)[settings.estimator]
+                        frame_state, reach_of=reach_of)[settings.estimator]
 
 
 def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional[Callable[[Progress], None]] = None,
                  cancel=None, cluster=None, frame_state: Optional[estimators.FrameState] = None, stop=None,
-                 preview: Optional[Callable[[Snapshot], None]] = None) -> dict:
+                 preview: Optional[Callable[[Snapshot], None]] = None, reach_of=None) -> dict:
     """Like `compute`, for several estimators fed the very same photons: every batch goes to each
     of them as it is traced. Returns {estimator name: BakeResult}. `settings.threads` (0: all
     cores) holds for tracing, shadow rays and the compiled estimators alike. `stop()` true ends
@@ -236,17 +248,41 @@ def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional
     if settings.threads:
         numba.set_num_threads(max(1, min(int(settings.threads), numba.config.NUMBA_NUM_THREADS)))
     try:
-        return _compute_many(scene, settings, names, progress, cancel, cluster, frame_state, stop, preview)
+        return _compute_many(scene, settings, names, progress, cancel, cluster, frame_state, stop, preview, reach_of)
     finally:
         numba.set_num_threads(before)
 
 
+def _wide(settings: BakeSettings) -> BakeSettings:
+    """The settings with the disc radius in texels set from the direct-light mode when unset."""
+    if settings.estimator_settings.radius_texels is not None:
+        return settings
+    texels_wide = estimators.RADIUS_TEXELS_INDIRECT if settings.direct == "sampled" else estimators.RADIUS_TEXELS_ALL
+    return replace(settings, estimator_settings=replace(settings.estimator_settings, radius_texels=texels_wide))
+
+
+def _reach(scene: Scene, estimator_settings: EstimatorSettings, names, resolution: int) -> float:
+    """The widest disc of objects `names` (a centred scene: the same floats as `rasterise` finds)."""
+    if estimator_settings.radius is not None:
+        return float(estimator_settings.radius)
+    sizes = texels_mod.texel_sizes(scene, names, resolution)
+    return max((float(np.float64(size) * float(estimator_settings.radius_texels)) for size in sizes.values()),
+               default=0.0)
+
+
+def disc_reach(scene: Scene, settings: BakeSettings, names) -> float:
+    """How far beyond the geometry a bake of objects `names` with a disc estimator starts sun and
+    sky photons: its widest disc (0 without discs)."""
+    if not estimators.get(settings.estimator).discs:
+        return 0.0
+    settings = _wide(settings)
+    return _reach(scene.recentred()[0], settings.estimator_settings, names, settings.resolution)
+
+
 def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_state=None, stop=None,
-                  preview=None) -> dict:
+                  preview=None, reach_of=None) -> dict:
     names = list(dict.fromkeys(names))
-    if settings.estimator_settings.radius_texels is None:
-        texels_wide = estimators.RADIUS_TEXELS_INDIRECT if settings.direct == "sampled" else estimators.RADIUS_TEXELS_ALL
-        settings = replace(settings, estimator_settings=replace(settings.estimator_settings, radius_texels=texels_wide))
+    settings = _wide(settings)
     for name in names:
         replace(settings, estimator=name).validate()
     scene.check()
@@ -275,6 +311,8 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     discs = any(estimators.get(name).discs for name in names)
     radius = disc_radius(at, settings.estimator_settings) if discs else None
     reach = float(np.max(radius)) if discs and len(texels) else 0.0
+    if discs and reach_of:
+        reach = max(reach, _reach(scene, settings.estimator_settings, reach_of, settings.resolution))
     caster = RayCaster(scene.positions)
     tracer = PhotonTracer(scene, settings.photons, bounces, settings.seed, batch_size, settings.threads,
                           indirect_only=sampled, caster=caster, margin=reach)

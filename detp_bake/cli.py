@@ -100,7 +100,8 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--static", nargs="+", default=[], metavar="NAME",
                    help="with --frames: treat these objects as static")
     b.add_argument("--force", action="store_true",
-                   help="with --frames: bake again frames unchanged since the last bake into --out (kept by default)")
+                   help="bake again the objects' lightmaps (with --frames: the frames) unchanged since the last "
+                        "bake into --out (kept by default)")
     b.add_argument("--save", default=None, metavar="OUT.blend", help="save the baked .blend here")
     b.add_argument("--json", action="store_true", help="print a JSON summary on stdout instead of the file list")
 
@@ -267,33 +268,42 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
     `cancel()` true stops it before anything is written. Returns the summary `main` prints."""
     warn = output.Warnings()
     settings = settings_from_args(args)
-    if args.frames is not None or args.moving or args.static or args.force:
+    if args.frames is not None or args.moving or args.static:
         return run_frames(args, settings, bl_scene, cancel, warn)
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene, warn)
     _check_cancel(cancel)
     done = _run_job(job_mod.Job(scene, settings, out_dir, export_seconds=export_seconds, warnings=list(warn),
-                                cluster=getattr(args, "cluster", None)), cancel, warn)
-    result = done.results[settings.estimator]
-    _log_noise(result)
+                                cluster=getattr(args, "cluster", None), reuse=True, force=args.force), cancel, warn)
+    if done.reused:
+        names = list(done.reused)
+        _log(f"reused {len(names)} lightmap{'s' if len(names) > 1 else ''} unchanged since the last bake into "
+             f"{out_dir}: {', '.join(names[:8])}{' …' if len(names) > 8 else ''} (--force bakes them again)")
+    result = done.results.get(settings.estimator)
+    if result is not None:
+        _log_noise(result)
+    files = {**done.reused, **(result.files if result is not None else {})}
     report = done.report
     # The files are in place: from here on a signal no longer undoes the bake.
     saved = None
     if args.apply:
-        blender.apply_all(bl_scene, result.files, args.uv_layer, settings.estimator)
+        blender.apply_all(bl_scene, files, args.uv_layer, settings.estimator)
     if args.save:
         saved = Path(args.save).resolve()
-        blender.save_blend(saved, result.files)
+        blender.save_blend(saved, files)
         _log(f"saved {saved}")
-    return {"command": "bake", "files": result.files, "report": str(report), "saved": str(saved) if saved else None,
-            "estimator": settings.estimator, "photons": result.stats.photons, "stopped_by": result.stopped_by,
-            "noise": {n: round(100.0 * v, 3) for n, v in result.noise.items()}, "warnings": list(result.warnings)}
+    return {"command": "bake", "files": files, "report": str(report), "saved": str(saved) if saved else None,
+            "estimator": settings.estimator, "photons": result.stats.photons if result is not None else 0,
+            "stopped_by": result.stopped_by if result is not None else "reused",
+            "reused": list(done.reused),
+            "noise": {n: round(100.0 * v, 3) for n, v in (result.noise.items() if result is not None else ())},
+            "warnings": list(result.warnings) if result is not None else list(warn)}
 
 
 def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> dict:
     """--frames: every frame of the range (frames.py); a cancel keeps the frames finished."""
     from . import frames
     if args.frames is None:
-        raise BakeError("--moving, --static and --force need --frames")
+        raise BakeError("--moving and --static need --frames")
     frame_range = frames.parse_frames(args.frames)
     if args.apply and frame_range.step != 1:
         raise BakeError("--apply with --frames needs every frame (a step of 1): an image sequence has no gaps")

@@ -4,7 +4,9 @@ classic two-pass split; DESIGN.md §7).
 Direct light holds the hard shadows and most of the energy, and a density estimate blurs it over
 its disc. Sampled here, it has no blur at all: a point light needs one shadow ray per texel, a
 light with extent `samples` stratified rays (a Hammersley set, rotated per texel and light by a
-random offset so neighbouring texels do not share a pattern). The photons then carry only the
+random offset so neighbouring texels do not share a pattern). A texel's random numbers are keyed
+by what it is (its object's name and its pixel: `texel_ids`), not by its place among the texels
+baked, so its direct light does not change with the other objects baked alongside it. The photons then carry only the
 indirect part (`PhotonTracer(indirect_only=True)`), which is smooth, so the estimators' discs cost
 little accuracy there.
 
@@ -23,6 +25,7 @@ embreex `run(query='OCCLUDED')` per chunk and light, which releases the GIL.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import threading
 import time
@@ -167,7 +170,7 @@ def _towards(sx, sy, sz, nx, ny, nz):
 
 
 @jit
-def _shadow_rays(kind, prm, samples, key, a, b, pos, nrm, geo, eps,
+def _shadow_rays(kind, prm, samples, key, ids, a, b, pos, nrm, geo, eps,
                  cdf, tpos, tnrm, trad, o, d, t, w, owner):
     """Rays for texels a … b−1 and one light: origins `o` (offset along the geometric normal `geo`),
     unit directions `d`, far limits `t`, and `w` the RGB irradiance each adds when unoccluded
@@ -180,7 +183,7 @@ def _shadow_rays(kind, prm, samples, key, a, b, pos, nrm, geo, eps,
         nx, ny, nz = nrm[i, 0], nrm[i, 1], nrm[i, 2]
         gx, gy, gz = geo[i, 0], geo[i, 1], geo[i, 2]
         ox, oy, oz = px + eps * gx, py + eps * gy, pz + eps * gz
-        state, r0, r1 = uniform2(photon_rng(key, i))
+        state, r0, r1 = uniform2(photon_rng(key, ids[i]))
         for j in range(samples):
             u0 = (j + 0.5) * inv_s + r0
             u0 -= math.floor(u0)
@@ -356,6 +359,15 @@ def geometric_normals(scene: Scene, triangle: np.ndarray, towards: np.ndarray) -
     return g
 
 
+def texel_ids(texels) -> np.ndarray:
+    """(N,) uint64: each texel's random stream, from its lightmap's name and its pixel."""
+    ids = np.empty(len(texels), np.uint64)
+    for lm in texels.lightmaps:
+        name = np.frombuffer(hashlib.blake2b(lm.name.encode(), digest_size=8).digest(), np.uint64)[0]
+        ids[lm.texels] = texels.pixel[lm.texels].astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15) + name
+    return ids
+
+
 def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPLES, seed: int = 0,
                       threads: int = 1, progress: Optional[Callable[[float], None]] = None,
                       cancel: Optional[Callable[[], bool]] = None) -> tuple[np.ndarray, dict]:
@@ -373,6 +385,7 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     pos = np.ascontiguousarray(texels.position, np.float64)
     nrm = np.ascontiguousarray(texels.normal, np.float64)
     geo = geometric_normals(scene, texels.triangle, nrm)
+    ids = texel_ids(texels)
     centre, radius = scene.bounds()
     eps = max(1e-5 * radius, 1e-6)
     srf = surfaces(scene)
@@ -398,9 +411,9 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
             key = seed_key(seed * 7919 + 1000003 * (li + 1))
             mesh = light.kind == MESH
             if light.kind == WORLD_MAP:
-                k = environment_rays(*light.env, light.samples, key, a, b, pos, nrm, geo, eps, o, d, t, w, owner)
+                k = environment_rays(*light.env, light.samples, key, ids, a, b, pos, nrm, geo, eps, o, d, t, w, owner)
             else:
-                k = _shadow_rays(light.kind, light.params, light.samples, key, a, b, pos, nrm, geo, eps,
+                k = _shadow_rays(light.kind, light.params, light.samples, key, ids, a, b, pos, nrm, geo, eps,
                                  light.tri_cdf if mesh else empty_cdf, light.tri_pos if mesh else empty_tri,
                                  light.tri_normal if mesh else empty_vec,
                                  light.tri_radiance if mesh else empty_vec, o, d, t, w, owner)

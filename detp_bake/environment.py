@@ -124,7 +124,7 @@ def environment_emitter(env: EnvironmentMap, centre: np.ndarray, radius: float, 
 
 
 @jit
-def environment_rays(marginal, cond, prob, rot, pixels, samples, key, a, b, pos, nrm, geo, eps, o, d, t, w, owner):
+def environment_rays(marginal, cond, prob, rot, pixels, samples, key, ids, a, b, pos, nrm, geo, eps, o, d, t, w, owner):
     """Shadow rays towards the map for texels a … b−1 (see direct._shadow_rays): each adds
     L(ω)·cos θ / (p(ω)·samples) when nothing is in the way."""
     k = 0
@@ -132,7 +132,7 @@ def environment_rays(marginal, cond, prob, rot, pixels, samples, key, a, b, pos,
     for i in range(a, b):
         nx, ny, nz = nrm[i, 0], nrm[i, 1], nrm[i, 2]
         gx, gy, gz = geo[i, 0], geo[i, 1], geo[i, 2]
-        state, r0, r1 = uniform2(photon_rng(key, i))
+        state, r0, r1 = uniform2(photon_rng(key, ids[i]))
         for j in range(samples):
             u0 = (j + 0.5) * inv_s + r0
             u0 -= math.floor(u0)

@@ -4,8 +4,8 @@ A static texel's shadow rays run from the texel to its lights; if none of them c
 moving object in any frame of the range (a box per moving object and frame, found when the frames
 were evaluated: frames.py), its direct light is the same in every frame and is kept from the first.
 Only those texels, and the moving objects' own, are sampled again each frame. They are sampled as
-a set of their own, the same set every frame, so each keeps its random numbers from frame to frame
-(direct.py draws them per texel index) and nothing flickers; the first frame samples every texel
+a set of their own, the same set every frame, and each keeps its random numbers from frame to frame
+(direct.py draws them per texel, keyed by its object and pixel), so nothing flickers; the first frame samples every texel
 once for the rest.
 
 The test is conservative: a shadow ray from x to a light within a sphere (c, r) lies within r of

@@ -18,18 +18,18 @@ valid, shorter sequence with a report that lists them.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import re
 import time
-from dataclasses import asdict, dataclass, field, is_dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable, Optional
 
 import numpy as np
 
 from . import __version__, bake as bake_mod, images
+from .incremental import digest as _digest, lights_signature, object_signatures  # noqa: F401  (frames' keys)
 from .errors import BakeCancelled, BakeError
 from .estimators import FrameState
 from .scene import Scene
@@ -71,28 +71,6 @@ def parse_frames(text: str) -> FrameRange:
     return FrameRange(start, end, step)
 
 
-def _digest(parts: Iterable) -> str:
-    h = hashlib.blake2b(digest_size=16)
-    for part in parts:
-        if part is None:
-            h.update(b"none")
-            continue
-        a = np.ascontiguousarray(part)
-        h.update(str((a.dtype.str, a.shape)).encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
-
-
-def object_signatures(scene: Scene) -> dict[str, str]:
-    """A hash per object of everything the bake reads of it in world space: corner positions and
-    normals, lightmap UVs, albedo, emission, texture and cut-out assignments."""
-    per_triangle = [scene.positions, scene.normals, scene.uvs, scene.albedo, scene.emission, scene.tex_uvs,
-                    scene.albedo_texture, scene.opacity, scene.opacity_texture]
-    return {obj.name: _digest([None if a is None else a[obj.triangles] for a in per_triangle] +
-                              [np.array([obj.bake, obj.resolution])])
-            for obj in scene.objects}
-
-
 def object_boxes(scene: Scene) -> dict[str, np.ndarray]:
     """Each object's world-space bounding box, (2, 3): lo, hi."""
     out = {}
@@ -101,18 +79,6 @@ def object_boxes(scene: Scene) -> dict[str, np.ndarray]:
         if len(p):
             out[obj.name] = np.array([p.min(axis=0), p.max(axis=0)], np.float64)
     return out
-
-
-def lights_signature(scene: Scene) -> str:
-    """A hash of the lights and the world colour (an HDRI world counts by its identity)."""
-    parts = [np.asarray(scene.world, np.float64)]
-    for light in scene.lights:
-        values = asdict(light) if is_dataclass(light) else vars(light)
-        for key in sorted(values):
-            v = values[key]
-            parts.append(np.frombuffer(str(v).encode(), np.uint8) if isinstance(v, str) else np.asarray(v, np.float64))
-    parts.append(np.frombuffer(str(id(scene.world_map) if scene.world_map is not None else 0).encode(), np.uint8))
-    return _digest(parts)
 
 
 @dataclass

@@ -82,6 +82,7 @@ class Result(Event):
     report: Optional[Path]  # report.json (a bake) or the comparison's report
     comparison: Optional[dict] = None  # a compare's summary (comparison.report_files)
     frames: Optional[object] = None  # a frame range's frames.FramesResult (cancelled: the frames kept)
+    reused: dict = field(default_factory=dict)  # object -> files of lightmaps kept from the last bake
 
 
 @dataclass
@@ -163,7 +164,8 @@ class Job:
     (a command line's stderr), before the front end's own read of the queue."""
 
     def __init__(self, scene, settings: bake_mod.BakeSettings, out_dir=None, names=None, *,
-                 export_seconds: float = 0.0, preview: float = 0.0, warnings=(), cluster=None, listener=None):
+                 export_seconds: float = 0.0, preview: float = 0.0, warnings=(), cluster=None, listener=None,
+                 reuse: bool = False, force: bool = False):
         self.kind = "bake" if names is None else "compare"
         self.names = [settings.estimator] if names is None else list(dict.fromkeys(names))
         self.scene = scene
@@ -174,6 +176,9 @@ class Job:
         self._warnings = list(warnings)
         self.listener = listener
         self.cluster = cluster
+        # A bake keeps the lightmaps of the last bake into out_dir that cannot have changed
+        # (incremental.py); `force` bakes them all again.
+        self.reuse, self.force = reuse, force
         self._events: "queue.Queue[Event]" = queue.Queue()
         self._cancel = threading.Event()
         self._stop = threading.Event()
@@ -296,12 +301,23 @@ class Job:
         if self.out_dir is not None:
             from . import images
             images.check_writable_dir(self.out_dir)
+        scene, plan = self.scene, None
+        if self.reuse and self.kind == "bake" and self.out_dir is not None:
+            from . import incremental
+            plan = incremental.plan(scene, self.settings, self.out_dir, self.force)
+            if not plan.bake:  # every lightmap is there and cannot have changed
+                report = incremental.write_all_reused(plan, self.out_dir)
+                return Result({}, self.out_dir, report, reused={n: e["files"] for n, e in plan.reused.items()})
+            scene = incremental.without(scene, plan.reused)
         connect = self.cluster is not None and getattr(self.cluster, "client", None) is None
         with (self.cluster if connect else contextlib.nullcontext(self.cluster)) as cluster:  # here, off the UI
-            results = bake_mod.compute_many(self.scene, self.settings, self.names, self._progress, self._cancel,
+            results = bake_mod.compute_many(scene, self.settings, self.names, self._progress, self._cancel,
                                             cluster=cluster, stop=self._stop.is_set,
-                                            preview=self._preview if self.preview_interval > 0 else None)
+                                            preview=self._preview if self.preview_interval > 0 else None,
+                                            reach_of=list(plan.reused) if plan is not None else None)
         for result in results.values():
+            if plan is not None:
+                incremental.record(result, plan)
             result.seconds["export"] = self.export_seconds
             found = []
             if self.out_dir is not None:  # older files of these lightmaps that this bake leaves
@@ -322,7 +338,8 @@ class Job:
                 report = bake_mod.write(results[self.names[0]], self.out_dir, self._progress, self._cancel)
         elif self.kind == "compare":
             summary, _ = comparison.report_files(results, self.names)
-        return Result(results, self.out_dir, report, summary)
+        return Result(results, self.out_dir, report, summary,
+                      reused={n: e["files"] for n, e in plan.reused.items()} if plan is not None else {})
 
 
 class FramesJob(Job):

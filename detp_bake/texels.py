@@ -191,16 +191,37 @@ def _rasterise(uv, world_area, width, height, best_tri, best_d2, bary, cover, in
     return total, within
 
 
-def rasterise(scene: Scene) -> TexelSet:
-    """Texels of every object with `bake` set, at its `resolution` (square lightmaps)."""
-    parts = []
-    lightmaps: list[Lightmap] = []
-    offset = 0
+def _areas(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Each triangle's world area and lightmap UV area."""
     world_area = 0.5 * np.linalg.norm(np.cross(scene.positions[:, 1] - scene.positions[:, 0],
                                                scene.positions[:, 2] - scene.positions[:, 0]), axis=1)
     uv = scene.uvs.astype(np.float64)
     uv_area = 0.5 * np.abs((uv[:, 1, 0] - uv[:, 0, 0]) * (uv[:, 2, 1] - uv[:, 0, 1])
                            - (uv[:, 1, 1] - uv[:, 0, 1]) * (uv[:, 2, 0] - uv[:, 0, 0]))
+    return world_area, uv_area
+
+
+def _texel_size(world_area, uv_area, sl: slice, res: int) -> float:
+    obj_uv = uv_area[sl].sum() * res * res
+    return float(np.sqrt(world_area[sl].sum() / obj_uv)) if obj_uv > 0 else 0.0
+
+
+def texel_sizes(scene: Scene, names, resolution: int) -> dict:
+    """{object name: metres per texel} of objects `names` (a resolution of 0: `resolution`), as
+    `rasterise` finds them, without rasterising: what the widest disc of a set of objects is."""
+    world_area, uv_area = _areas(scene)
+    names = set(names)
+    return {obj.name: _texel_size(world_area, uv_area, obj.triangles, int(obj.resolution or resolution))
+            for obj in scene.objects if obj.name in names}
+
+
+def rasterise(scene: Scene) -> TexelSet:
+    """Texels of every object with `bake` set, at its `resolution` (square lightmaps)."""
+    parts = []
+    lightmaps: list[Lightmap] = []
+    offset = 0
+    world_area, uv_area = _areas(scene)
+    uv = scene.uvs.astype(np.float64)
     for index, obj in enumerate(scene.objects):
         if not obj.bake:
             continue
@@ -230,8 +251,7 @@ def rasterise(scene: Scene) -> TexelSet:
         bad = length < 1e-8
         nrm[bad] = face[bad]
         nrm /= np.maximum(np.linalg.norm(nrm, axis=1), 1e-30)[:, None]
-        obj_uv = uv_area[sl].sum() * res * res
-        texel_size = float(np.sqrt(world_area[sl].sum() / obj_uv)) if obj_uv > 0 else 0.0
+        texel_size = _texel_size(world_area, uv_area, sl, res)
         held = int(np.count_nonzero(inside))
         overlap = float(np.count_nonzero(inside > 1)) / held if held else 0.0
         outside = max(0.0, 1.0 - within / total) if total > 0 else 0.0

@@ -52,7 +52,6 @@ def test_moving_found_by_evaluation_and_overrides(tmp_path, capsys, bpy):
 @pytest.mark.parametrize("argv, message", [
     (["--frames", "5-1"], "comes before"),
     (["--moving", "Mover"], "need --frames"),
-    (["--force"], "need --frames"),
     (["--frames", "1-2", "--moving", "Nobody"], "'Nobody'"),
     (["--frames", "1-4:2", "--apply"], "a step of 1"),
 ])
