@@ -15,8 +15,8 @@ exactly), never extrapolated. Border texels are never corners: light bends there
 room's blended texels 1.3 % low at 32² (measured).
 
 The sites form a TexelSet of their own: lattice sites keep their lattice (pixel (i/s, j/s) of a
-lightmap s times smaller, so lattice patches still find them), the extra sites follow below it in
-rows of their own, and every lightmap keeps its texel size, so disc radii stay the same in metres.
+lightmap s times smaller, so lattice patches still find them), the extra sites follow below it,
+one per row, and every lightmap keeps its texel size, so disc radii stay the same in metres.
 """
 from __future__ import annotations
 
@@ -146,7 +146,8 @@ def _corners(pixel, width, height, s, grid, position, normal, centre_inside, rea
 
 def _site_texels(texels: TexelSet, index: np.ndarray, s: int) -> TexelSet:
     """The sites as a TexelSet: lattice sites at pixel (i/s, j/s) of a lightmap s times smaller,
-    extra sites in rows below it, each in its own column (no two sites share a pixel)."""
+    extra sites below it in column 0, one per row: no two sites share a pixel, and sites in one
+    column never form a lattice patch (patches.py), whatever their places."""
     pixel = np.empty(len(index), np.int64)
     lightmaps = []
     offset = 0
@@ -157,9 +158,9 @@ def _site_texels(texels: TexelSet, index: np.ndarray, s: int) -> TexelSet:
         width, height = -(-lm.width // s), -(-lm.height // s)
         on = (i % s == 0) & (j % s == 0)
         extra = np.cumsum(~on) - 1
-        sub = np.where(on, (j // s) * width + i // s, width * height + extra)
+        sub = np.where(on, (j // s) * width + i // s, (height + extra) * width)
         pixel[offset:offset + len(mine)] = sub
-        rows = height + (-(-int((~on).sum()) // width))
+        rows = height + int((~on).sum())
         lightmaps.append(replace(lm, width=width, height=rows, offset=offset, count=len(mine)))
         offset += len(mine)
     return TexelSet(texels.position[index], texels.normal[index], texels.triangle[index], pixel,

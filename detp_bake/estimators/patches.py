@@ -159,6 +159,8 @@ def _accept(grid, member, centre, normal, radius, slab, lattice_tol, normal_tol,
     if not (res <= lattice_tol * np.sqrt(min(uu, vv)) and tol_n <= normal_tol and max(uu, vv) <= 4 * r * r):
         return False
     det = uu * vv - uv * uv
+    if not (min(uu, vv) > 0.0 and det > 1e-12 * uu * vv):  # sites on one point or one line (a pole)
+        return False
     geo[p, C0:C0 + 3], geo[p, DU:DU + 3], geo[p, DV:DV + 3], geo[p, NRM:NRM + 3] = c0, du, dv, nm
     geo[p, RAD], geo[p, SLAB], geo[p, INV_AREA] = r, sl, 1.0 / (np.pi * (r * r))
     geo[p, TOL_C], geo[p, TOL_N], geo[p, TOL_H] = res, tol_n, tol_h * (1.0 + 1e-9) + 1e-15
