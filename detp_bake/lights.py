@@ -134,7 +134,7 @@ def _draw4(key, photon_id):
 POINT, SPOT, PARALLEL, AREA, MESH = range(5)
 # A light's constants in one float64 vector (`_params`): a frame (tangent, tangent, axis), a
 # position, the flux per photon (set per call: it depends on the photon count), three scalars
-# and an area light's matrix, its top three rows.
+# (_A, _B, _C: see `_sample` for each kind's) and an area light's matrix, its top three rows.
 _T, _S, _AXIS, _POS, _FLUX, _A, _B, _C, _M = 0, 3, 6, 9, 12, 15, 16, 17, 18
 _SIZE = 30
 # The triangle tables of `_emit`'s MESH kind, empty for the others: every call has the same types.
@@ -165,56 +165,53 @@ def _vec(par, at):
 
 
 @inline
-def _point(key, photon_id, par):
-    """Uniform over the sphere of radius _A, cosine-weighted outwards; a point when _A is 0."""
+def _point(key, photon_id, pos, radius, flux):
+    """Uniform over a sphere of `radius`, cosine-weighted outwards; from `pos` when radius is 0."""
     r, u0, u1, u2, u3 = _draw4(key, photon_id)
     nx, ny, nz = uniform_sphere(u0, u1)
-    radius = par[_A]
     if radius > 0.0:
-        ox, oy, oz = par[_POS] + radius * nx, par[_POS + 1] + radius * ny, par[_POS + 2] + radius * nz
+        ox, oy, oz = pos[0] + radius * nx, pos[1] + radius * ny, pos[2] + radius * nz
         dx, dy, dz = cosine_hemisphere(nx, ny, nz, u2, u3)
     else:
-        ox, oy, oz = _vec(par, _POS)
+        ox, oy, oz = pos
         dx, dy, dz = nx, ny, nz
-    return r, ox, oy, oz, dx, dy, dz, par[_FLUX], par[_FLUX + 1], par[_FLUX + 2]
+    return r, ox, oy, oz, dx, dy, dz, flux[0], flux[1], flux[2]
 
 
 @inline
-def _spot(key, photon_id, par):
-    """Uniform in the cone acos(_A) about the axis, the flux attenuated by Cycles' blend (_B)."""
+def _spot(key, photon_id, pos, t, s, axis, cos_half, smooth, scale):
+    """Uniform in the cone acos(cos_half) about the axis, attenuated by Cycles' blend."""
     r, u0, u1, u2, u3 = _draw4(key, photon_id)
-    cos_half = par[_A]
     lx, ly, lz = cone_lobe(cos_half, u0, u1)
-    dx, dy, dz = in_frame(lx, ly, lz, _vec(par, _T), _vec(par, _S), _vec(par, _AXIS))
-    att = _spot_att(lz, cos_half, par[_B])
-    return (r, par[_POS], par[_POS + 1], par[_POS + 2], dx, dy, dz,
-            par[_FLUX] * att, par[_FLUX + 1] * att, par[_FLUX + 2] * att)
+    dx, dy, dz = in_frame(lx, ly, lz, t, s, axis)
+    att = _spot_att(lz, cos_half, smooth)
+    return r, pos[0], pos[1], pos[2], dx, dy, dz, scale[0] * att, scale[1] * att, scale[2] * att
 
 
 @inline
-def _parallel(key, photon_id, par):
-    """A sun over a scene without triangles: directions within acos(_A) of the axis, starting on a
-    disc of the scene's bounding radius (_B) perpendicular to their own direction, 2 radii out from
-    the centre (_POS), which keeps the irradiance uniform. (Sky photons: footprint.emit_sky.)"""
+def _parallel(key, photon_id, t, s, axis, cos_max, centre, radius, flux):
+    """A sun over a scene without triangles: directions within acos(cos_max) of the axis, starting
+    on a disc of the scene's bounding radius perpendicular to their own direction, 2 radii out,
+    which keeps the irradiance uniform. (Sky photons: footprint.emit_sky.)"""
     r, u0, u1, u2, u3 = _draw4(key, photon_id)
-    cos_max, radius = par[_A], par[_B]
     if cos_max < 1.0:
         lx, ly, lz = cone_lobe(cos_max, u2, u3)
-        dx, dy, dz = in_frame(lx, ly, lz, _vec(par, _T), _vec(par, _S), _vec(par, _AXIS))
+        dx, dy, dz = in_frame(lx, ly, lz, t, s, axis)
     else:
-        dx, dy, dz = _vec(par, _AXIS)
+        dx, dy, dz = axis
     px, py = uniform_disc(u0, u1)
     t, s = orthonormal_basis(dx, dy, dz)
-    return (r, par[_POS] + radius * (px * t[0] + py * s[0]) - 2.0 * radius * dx,
-            par[_POS + 1] + radius * (px * t[1] + py * s[1]) - 2.0 * radius * dy,
-            par[_POS + 2] + radius * (px * t[2] + py * s[2]) - 2.0 * radius * dz,
-            dx, dy, dz, par[_FLUX], par[_FLUX + 1], par[_FLUX + 2])
+    return (r, centre[0] + radius * (px * t[0] + py * s[0]) - 2.0 * radius * dx,
+            centre[1] + radius * (px * t[1] + py * s[1]) - 2.0 * radius * dy,
+            centre[2] + radius * (px * t[2] + py * s[2]) - 2.0 * radius * dz,
+            dx, dy, dz, flux[0], flux[1], flux[2])
 
 
 @inline
 def _area(key, photon_id, par):
     """Uniform over the rectangle (or ellipse: _C) _A × _B in the light's local XY plane, placed
-    by its matrix (_M); cosine-weighted about the normal (the frame's axis)."""
+    by its matrix (_M), cosine-weighted about the normal (the frame's axis). Read from `par` per
+    photon: given as values, the matrix's multiply-adds fused otherwise, 1 ulp off before."""
     r, u0, u1, u2, u3 = _draw4(key, photon_id)
     sx, sy = par[_A], par[_B]
     if par[_C] != 0.0:
@@ -231,16 +228,16 @@ def _area(key, photon_id, par):
 
 
 @inline
-def _mesh(key, photon_id, par, cdf, p, normal, tri_flux):
-    """A triangle picked by `cdf`, a point uniform on it, a side at random, _A off the surface,
-    cosine-weighted; tri_flux: each triangle's RGB flux over its probability and the photon count."""
+def _mesh(key, photon_id, cdf, p, normal, tri_flux, offset):
+    """A triangle picked by `cdf`, a point uniform on it, a side at random, `offset` off the
+    surface, cosine-weighted; tri_flux: each triangle's RGB flux over its probability and the
+    photon count."""
     r, u0, u1, u2, u3 = _draw4(key, photon_id)
     r, u4, u5 = uniform2(r)
     lo = search_cdf(cdf, u0)
     b0, b1, b2 = uniform_triangle(u1, u2)
     side = 1.0 if u5 < 0.5 else -1.0
     nx, ny, nz = side * normal[lo, 0], side * normal[lo, 1], side * normal[lo, 2]
-    offset = par[_A]
     ox = b0 * p[lo, 0, 0] + b1 * p[lo, 1, 0] + b2 * p[lo, 2, 0] + offset * nx
     oy = b0 * p[lo, 0, 1] + b1 * p[lo, 1, 1] + b2 * p[lo, 2, 1] + offset * ny
     oz = b0 * p[lo, 0, 2] + b1 * p[lo, 1, 2] + b2 * p[lo, 2, 2] + offset * nz
@@ -258,27 +255,38 @@ def _put(buf, state, k, photon):
 
 
 @jit
+def _sample(kind, key, first, a, b, par, cdf, p, normal, tri_flux, buf, state):
+    """Photons first + a … first + b − 1 into the block, by the kind's sampler, its constants
+    read from `par` once (the block's stores could alias it: per photon, they would be reloaded).
+    Unlike the skeleton (float32 or float64 outputs), this kernel sees the same types in every
+    call, so the samplers compile once."""
+    t, s, axis, pos, flux = _vec(par, _T), _vec(par, _S), _vec(par, _AXIS), _vec(par, _POS), _vec(par, _FLUX)
+    pa, pb, pc = par[_A], par[_B], par[_C]
+    if kind == POINT:
+        for i in range(a, b):
+            _put(buf, state, i - a, _point(key, first + i, pos, pa, flux))
+    elif kind == SPOT:
+        for i in range(a, b):
+            _put(buf, state, i - a, _spot(key, first + i, pos, t, s, axis, pa, pb, flux))
+    elif kind == PARALLEL:
+        for i in range(a, b):
+            _put(buf, state, i - a, _parallel(key, first + i, t, s, axis, pa, pos, pb, flux))
+    elif kind == AREA:
+        for i in range(a, b):
+            _put(buf, state, i - a, _area(key, first + i, par))
+    else:
+        for i in range(a, b):
+            _put(buf, state, i - a, _mesh(key, first + i, cdf, p, normal, tri_flux, pa))
+
+
+@jit
 def _emit(kind, key, first, n, par, cdf, p, normal, tri_flux, o, d, f, rng):
-    """The Emit of every kind (`par`: _params; the triangle tables: MESH only), a block at a time.
-    The kind is chosen per block: each loop over a block holds one sampler and stays simple."""
+    """The Emit of every kind (`par`: _params; the triangle tables: MESH only), a block at a time;
+    the kind is chosen per block, so each loop over a block holds one sampler."""
     buf, state = _block()
     for a in range(0, n, BLOCK):
         b = min(n, a + BLOCK)
-        if kind == POINT:
-            for i in range(a, b):
-                _put(buf, state, i - a, _point(key, first + i, par))
-        elif kind == SPOT:
-            for i in range(a, b):
-                _put(buf, state, i - a, _spot(key, first + i, par))
-        elif kind == PARALLEL:
-            for i in range(a, b):
-                _put(buf, state, i - a, _parallel(key, first + i, par))
-        elif kind == AREA:
-            for i in range(a, b):
-                _put(buf, state, i - a, _area(key, first + i, par))
-        else:
-            for i in range(a, b):
-                _put(buf, state, i - a, _mesh(key, first + i, par, cdf, p, normal, tri_flux))
+        _sample(kind, key, first, a, b, par, cdf, p, normal, tri_flux, buf, state)
         _flush(buf, state, a, b, o, d, f, rng)
 
 
