@@ -32,9 +32,9 @@ def _placed(scale: float, at) -> np.ndarray:
 
 def _box() -> Scene:
     """A closed unit box seen from inside (12 triangles, each face a cell of a 3 × 2 UV atlas),
-    lit by one light of every kind, an emissive triangle and a sky. One kernel emits the point,
-    spot, area and mesh photons (lights._emit): a new light type adds no emitter compile. The sun
-    on its footprint and the sky have kernels of their own."""
+    lit by one light of every kind, an emissive triangle and a sky. The same kernels emit the
+    point, spot, area and mesh photons (lights._emit): a new light type adds no emitter compile.
+    The sun on its footprint and the sky have kernels of their own."""
     faces = []  # (corner order) per face, inward
     c = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
     for quad in ((0, 1, 2, 3), (4, 7, 6, 5), (0, 4, 5, 1), (1, 5, 6, 2), (2, 6, 7, 3), (3, 7, 4, 0)):
