@@ -197,13 +197,16 @@ class BakeResult:
 class Snapshot:
     """The bake so far, after a block of batches, for a live preview: `read()` returns the primary
     estimator's current estimate of the whole bake, E/π per texel (N, 3), direct light included
-    (the sums so far over the share traced, as an early stop would keep them)."""
+    (the batches so far over the share traced, as an early stop would keep them). Read it before
+    the next block is added, or not at all: `slow` says reading it costs a gather over every hit
+    so far (the photon map), not a copy of sums."""
     estimator: str
     photons: int
     share: float
     noise: Optional[float]  # the worst lightmap's relative noise so far, when measured
     texels: texels_mod.TexelSet
     read: Callable[[], np.ndarray]
+    slow: bool = False
 
 
 def preview_images(texels: texels_mod.TexelSet, value: np.ndarray, margin: int) -> dict:
@@ -242,7 +245,7 @@ def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional
     of them as it is traced. Returns {estimator name: BakeResult}. `settings.threads` (0: all
     cores) holds for tracing, shadow rays and the compiled estimators alike. `stop()` true ends
     tracing after the batch, keeping what there is as a finished bake (stopped_by "user");
-    `preview` sees the bake after every block of batches (Snapshot)."""
+    `preview` sees the bake after every block of batches (Snapshot), whatever the estimator."""
     import numba
     before = numba.get_num_threads()
     if settings.threads:
@@ -336,6 +339,10 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
             raise BakeCancelled()
         report(Progress("estimate", fraction, f"Estimating {100 * fraction:.0f} %"))
 
+    def preview_check(fraction):  # a slow preview's gather is a cancel point, not a phase
+        if cancelled():
+            raise BakeCancelled()
+
     expected_segments = int(tracer.photons * per_photon_kept)
     clearance = rise = None
     t0 = time.perf_counter()
@@ -392,9 +399,10 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
             trace_progress(totals.stats.photons)
             if cancelled():
                 raise BakeCancelled()
-            if preview is not None and runs[primary].streaming:
+            if preview is not None:
+                so_far = partial(runs[primary].current, totals.sums[primary], preview_check)
                 preview(Snapshot(primary, totals.stats.photons, share, max(current.values(), default=None), texels,
-                                 partial(_snapshot_value, sites, totals.sums[primary]["irradiance"], direct_e, share)))
+                                 partial(_snapshot_value, sites, so_far, direct_e, share), runs[primary].slow_preview))
             if stop is not None and totals.batches < tracer.batch_count and stop():
                 stopped_by = "user"
                 break
@@ -614,8 +622,8 @@ def indirect_spacing(settings: BakeSettings, frame_state=None) -> int:
     return int(settings.indirect_spacing) or AUTO_SPACING
 
 
-def _snapshot_value(sites, irradiance, direct_e, share) -> np.ndarray:
-    irradiance = irradiance / share
+def _snapshot_value(sites, current, direct_e, share) -> np.ndarray:
+    irradiance = current() / share
     if sites.spacing > 1:
         irradiance = sites.expand(irradiance)
     return (irradiance if direct_e is None else irradiance + direct_e) / np.pi

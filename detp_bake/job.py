@@ -27,6 +27,10 @@ from .errors import BakeCancelled, BakeError
 # Share of the whole job each phase stands for (the progress bar and the ETA).
 PHASES = {"export": (0.0, 0.0), "direct": (0.0, 0.1), "prepare": (0.1, 0.15), "trace": (0.15, 0.9),
           "estimate": (0.9, 0.97), "write": (0.97, 1.0)}
+# A slow preview (the photon map's gather over every hit so far, on the worker: tracing waits for
+# it) waits this many times as long as it took before the next, so previews cost at most a sixth
+# of the bake.
+SLOW_PREVIEW_WAIT = 5.0
 
 
 class JobBusy(BakeError):
@@ -157,11 +161,11 @@ class _Clock:
 class Job:
     """`names` None: a bake of settings.estimator; a list: a comparison of those estimators fed
     the same photons (the first is the reference). `out_dir` None computes only. `preview`
-    seconds > 0: a Preview event at most that often while tracing (DETP estimators; the photon
-    map has nothing to show before its gather). `warnings`: what the front end found before the
-    job (they go into report.json too). `cluster`: a distributed.Cluster to trace on. `listener`
-    sees every event on the worker thread as it is sent, in order with anything the worker prints
-    (a command line's stderr), before the front end's own read of the queue."""
+    seconds > 0: a Preview event at most that often while tracing (the photon map's less often:
+    SLOW_PREVIEW_WAIT). `warnings`: what the front end found before the job (they go into
+    report.json too). `cluster`: a distributed.Cluster to trace on. `listener` sees every event
+    on the worker thread as it is sent, in order with anything the worker prints (a command
+    line's stderr), before the front end's own read of the queue."""
 
     def __init__(self, scene, settings: bake_mod.BakeSettings, out_dir=None, names=None, *,
                  export_seconds: float = 0.0, preview: float = 0.0, warnings=(), cluster=None, listener=None,
@@ -186,7 +190,7 @@ class Job:
         self.phase = "export"
         self.last: Optional[Progress] = None
         self.outcome: Optional[Event] = None  # the terminal event, once the worker has sent it
-        self._last_preview = -1e9
+        self._next_preview = -1e9  # perf_counter time
         self._clock = _Clock()
 
     # The front end's side -------------------------------------------------------------------
@@ -267,10 +271,13 @@ class Job:
 
     def _preview(self, partial: bake_mod.Snapshot) -> None:
         now = time.perf_counter()
-        if now - self._last_preview < self.preview_interval:
+        if now < self._next_preview:
             return
-        self._last_preview = now
+        self._next_preview = now + self.preview_interval
         images = bake_mod.preview_images(partial.texels, partial.read(), self.settings.margin)
+        if partial.slow:
+            done = time.perf_counter()
+            self._next_preview = max(self._next_preview, done + SLOW_PREVIEW_WAIT * (done - now))
         self._send(Preview(partial.estimator, images, partial.photons, partial.share, partial.noise))
 
     def _work(self) -> None:

@@ -3,9 +3,10 @@
 Each light becomes an `Emitter` that knows its emitted flux (RGB watts) and can draw photons
 (origin, direction, flux). Photons are shared out between emitters in proportion to their flux,
 with deterministic counts (largest remainder, `allocate`; batch by batch in schedule.py), so every
-photon of one emitter carries about the same flux and the total emitted flux is exact. Each light
-type has a compiled kernel; photon i draws its numbers from its own random stream (`sampling.py`),
-so emission can run in pieces, in any order, on any thread.
+photon of one emitter carries about the same flux and the total emitted flux is exact. One compiled
+kernel emits every light type (the sun on a footprint, the sky and an HDRI world have their own,
+footprint.py and environment.py); photon i draws its numbers from its own random stream
+(`sampling.py`), so emission can run in pieces, in any order, on any thread.
 """
 from __future__ import annotations
 
@@ -128,100 +129,192 @@ def _draw4(key, photon_id):
     return r, u0, u1, u2, u3
 
 
+# Light kinds. One compiled kernel (`_emit`) serves them all: a new kind adds a sampler, not a
+# compile of its own.
+POINT, SPOT, PARALLEL, AREA, MESH = range(5)
+# A light's constants in one float64 vector (`_params`): a frame (tangent, tangent, axis), a
+# position, the flux per photon (set per call: it depends on the photon count), three scalars
+# (_A, _B, _C: see `_sample` for each kind's) and an area light's matrix, its top three rows.
+_T, _S, _AXIS, _POS, _FLUX, _A, _B, _C, _M = 0, 3, 6, 9, 12, 15, 16, 17, 18
+_SIZE = 30
+# The triangle tables of `_emit`'s MESH kind, empty for the others: every call has the same types.
+_NO_MESH = (np.empty(0), np.empty((0, 3, 3)), np.empty((0, 3)), np.empty((0, 3)))
+
+
+def _params(frame=None, pos=None, a=0.0, b=0.0, c=0.0, m=None) -> np.ndarray:
+    p = np.zeros(_SIZE)
+    if frame is not None:
+        p[_T:_T + 3], p[_S:_S + 3], p[_AXIS:_AXIS + 3] = frame
+    if pos is not None:
+        p[_POS:_POS + 3] = pos
+    p[_A], p[_B], p[_C] = a, b, c
+    if m is not None:
+        p[_M:_M + 12] = np.asarray(m, np.float64)[:3].ravel()
+    return p
+
+
+def _with_flux(par: np.ndarray, flux: np.ndarray) -> np.ndarray:
+    p = par.copy()
+    p[_FLUX:_FLUX + 3] = flux
+    return p
+
+
+@inline
+def _vec(par, at):
+    return par[at], par[at + 1], par[at + 2]
+
+
+@inline
+def _point(key, photon_id, pos, radius, flux):
+    """Uniform over a sphere of `radius`, cosine-weighted outwards; from `pos` when radius is 0."""
+    r, u0, u1, u2, u3 = _draw4(key, photon_id)
+    nx, ny, nz = uniform_sphere(u0, u1)
+    if radius > 0.0:
+        ox, oy, oz = pos[0] + radius * nx, pos[1] + radius * ny, pos[2] + radius * nz
+        dx, dy, dz = cosine_hemisphere(nx, ny, nz, u2, u3)
+    else:
+        ox, oy, oz = pos
+        dx, dy, dz = nx, ny, nz
+    return r, ox, oy, oz, dx, dy, dz, flux[0], flux[1], flux[2]
+
+
+@inline
+def _spot(key, photon_id, pos, t, s, axis, cos_half, smooth, scale):
+    """Uniform in the cone acos(cos_half) about the axis, attenuated by Cycles' blend."""
+    r, u0, u1, u2, u3 = _draw4(key, photon_id)
+    lx, ly, lz = cone_lobe(cos_half, u0, u1)
+    dx, dy, dz = in_frame(lx, ly, lz, t, s, axis)
+    att = _spot_att(lz, cos_half, smooth)
+    return r, pos[0], pos[1], pos[2], dx, dy, dz, scale[0] * att, scale[1] * att, scale[2] * att
+
+
+@inline
+def _parallel(key, photon_id, t, s, axis, cos_max, centre, radius, flux):
+    """A sun over a scene without triangles: directions within acos(cos_max) of the axis, starting
+    on a disc of the scene's bounding radius perpendicular to their own direction, 2 radii out,
+    which keeps the irradiance uniform. (Sky photons: footprint.emit_sky.)"""
+    r, u0, u1, u2, u3 = _draw4(key, photon_id)
+    if cos_max < 1.0:
+        lx, ly, lz = cone_lobe(cos_max, u2, u3)
+        dx, dy, dz = in_frame(lx, ly, lz, t, s, axis)
+    else:
+        dx, dy, dz = axis
+    px, py = uniform_disc(u0, u1)
+    t, s = orthonormal_basis(dx, dy, dz)
+    return (r, centre[0] + radius * (px * t[0] + py * s[0]) - 2.0 * radius * dx,
+            centre[1] + radius * (px * t[1] + py * s[1]) - 2.0 * radius * dy,
+            centre[2] + radius * (px * t[2] + py * s[2]) - 2.0 * radius * dz,
+            dx, dy, dz, flux[0], flux[1], flux[2])
+
+
+@inline
+def _area(key, photon_id, par):
+    """Uniform over the rectangle (or ellipse: _C) _A × _B in the light's local XY plane, placed
+    by its matrix (_M), cosine-weighted about the normal (the frame's axis). Read from `par` per
+    photon: given as values, the matrix's multiply-adds fused otherwise, 1 ulp off before."""
+    r, u0, u1, u2, u3 = _draw4(key, photon_id)
+    sx, sy = par[_A], par[_B]
+    if par[_C] != 0.0:
+        px, py = uniform_disc(u0, u1)
+        lx, ly = 0.5 * sx * px, 0.5 * sy * py
+    else:
+        lx, ly = (u0 - 0.5) * sx, (u1 - 0.5) * sy
+    ox = par[_M] * lx + par[_M + 1] * ly + par[_M + 3]
+    oy = par[_M + 4] * lx + par[_M + 5] * ly + par[_M + 7]
+    oz = par[_M + 8] * lx + par[_M + 9] * ly + par[_M + 11]
+    lx, ly, lz = cosine_lobe(u2, u3)
+    dx, dy, dz = in_frame(lx, ly, lz, _vec(par, _T), _vec(par, _S), _vec(par, _AXIS))
+    return r, ox, oy, oz, dx, dy, dz, par[_FLUX], par[_FLUX + 1], par[_FLUX + 2]
+
+
+@inline
+def _mesh(key, photon_id, cdf, p, normal, tri_flux, offset):
+    """A triangle picked by `cdf`, a point uniform on it, a side at random, `offset` off the
+    surface, cosine-weighted; tri_flux: each triangle's RGB flux over its probability and the
+    photon count."""
+    r, u0, u1, u2, u3 = _draw4(key, photon_id)
+    r, u4, u5 = uniform2(r)
+    lo = search_cdf(cdf, u0)
+    b0, b1, b2 = uniform_triangle(u1, u2)
+    side = 1.0 if u5 < 0.5 else -1.0
+    nx, ny, nz = side * normal[lo, 0], side * normal[lo, 1], side * normal[lo, 2]
+    ox = b0 * p[lo, 0, 0] + b1 * p[lo, 1, 0] + b2 * p[lo, 2, 0] + offset * nx
+    oy = b0 * p[lo, 0, 1] + b1 * p[lo, 1, 1] + b2 * p[lo, 2, 1] + offset * ny
+    oz = b0 * p[lo, 0, 2] + b1 * p[lo, 1, 2] + b2 * p[lo, 2, 2] + offset * nz
+    dx, dy, dz = cosine_hemisphere(nx, ny, nz, u3, u4)
+    return r, ox, oy, oz, dx, dy, dz, tri_flux[lo, 0], tri_flux[lo, 1], tri_flux[lo, 2]
+
+
+@inline
+def _put(buf, state, k, photon):
+    """One sampler's photon (state, origin, direction, flux) into column k of the block."""
+    _set(buf, 0, k, photon[1], photon[2], photon[3])
+    _set(buf, 3, k, photon[4], photon[5], photon[6])
+    _set(buf, 6, k, photon[7], photon[8], photon[9])
+    state[k] = photon[0]
+
+
 @jit
-def _emit_point(key, first, n, pos, radius, flux, o, d, f, rng):
+def _sample(kind, key, first, a, b, par, cdf, p, normal, tri_flux, buf, state):
+    """Photons first + a … first + b − 1 into the block, by the kind's sampler, its constants
+    read from `par` once (the block's stores could alias it: per photon, they would be reloaded).
+    Unlike the skeleton (float32 or float64 outputs), this kernel sees the same types in every
+    call, so the samplers compile once."""
+    t, s, axis, pos, flux = _vec(par, _T), _vec(par, _S), _vec(par, _AXIS), _vec(par, _POS), _vec(par, _FLUX)
+    pa, pb, pc = par[_A], par[_B], par[_C]
+    if kind == POINT:
+        for i in range(a, b):
+            _put(buf, state, i - a, _point(key, first + i, pos, pa, flux))
+    elif kind == SPOT:
+        for i in range(a, b):
+            _put(buf, state, i - a, _spot(key, first + i, pos, t, s, axis, pa, pb, flux))
+    elif kind == PARALLEL:
+        for i in range(a, b):
+            _put(buf, state, i - a, _parallel(key, first + i, t, s, axis, pa, pos, pb, flux))
+    elif kind == AREA:
+        for i in range(a, b):
+            _put(buf, state, i - a, _area(key, first + i, par))
+    else:
+        for i in range(a, b):
+            _put(buf, state, i - a, _mesh(key, first + i, cdf, p, normal, tri_flux, pa))
+
+
+@jit
+def _emit(kind, key, first, n, par, cdf, p, normal, tri_flux, o, d, f, rng):
+    """The Emit of every kind (`par`: _params; the triangle tables: MESH only), a block at a time;
+    the kind is chosen per block, so each loop over a block holds one sampler."""
     buf, state = _block()
     for a in range(0, n, BLOCK):
         b = min(n, a + BLOCK)
-        for i in range(a, b):
-            k = i - a
-            r, u0, u1, u2, u3 = _draw4(key, first + i)
-            nx, ny, nz = uniform_sphere(u0, u1)
-            if radius > 0.0:
-                _set(buf, 0, k, pos[0] + radius * nx, pos[1] + radius * ny, pos[2] + radius * nz)
-                dx, dy, dz = cosine_hemisphere(nx, ny, nz, u2, u3)
-                _set(buf, 3, k, dx, dy, dz)
-            else:
-                _set(buf, 0, k, pos[0], pos[1], pos[2])
-                _set(buf, 3, k, nx, ny, nz)
-            _set(buf, 6, k, flux[0], flux[1], flux[2])
-            state[k] = r
+        _sample(kind, key, first, a, b, par, cdf, p, normal, tri_flux, buf, state)
         _flush(buf, state, a, b, o, d, f, rng)
 
 
 def point_emitter(light: PointLight) -> Emitter:
     power = np.asarray(light.power, np.float64)
-    pos = np.asarray(light.position, np.float64)
+    par = _params(pos=np.asarray(light.position, np.float64), a=float(light.radius))
 
     def emit(key, first, n, total, o, d, f, rng):
-        _emit_point(key, first, n, pos, float(light.radius), power / total, o, d, f, rng)
+        _emit(POINT, key, first, n, _with_flux(par, power / total), *_NO_MESH, o, d, f, rng)
 
     return Emitter(light.name, power, emit)
 
 
-@jit
-def _emit_spot(key, first, n, pos, frame, cos_half, smooth, scale, o, d, f, rng):
-    t, s, axis = frame
-    buf, state = _block()
-    for a in range(0, n, BLOCK):
-        b = min(n, a + BLOCK)
-        for i in range(a, b):
-            k = i - a
-            r, u0, u1, u2, u3 = _draw4(key, first + i)
-            lx, ly, lz = cone_lobe(cos_half, u0, u1)
-            dx, dy, dz = in_frame(lx, ly, lz, t, s, axis)
-            att = _spot_att(lz, cos_half, smooth)
-            _set(buf, 0, k, pos[0], pos[1], pos[2])
-            _set(buf, 3, k, dx, dy, dz)
-            _set(buf, 6, k, scale[0] * att, scale[1] * att, scale[2] * att)
-            state[k] = r
-        _flush(buf, state, a, b, o, d, f, rng)
-
-
 def spot_emitter(light: SpotLight) -> Emitter:
     power = np.asarray(light.power, np.float64)
-    pos = np.asarray(light.position, np.float64)
     axis = np.asarray(light.direction, np.float64)
     axis = axis / np.linalg.norm(axis)
     spot_size = min(float(light.spot_size), np.pi)
     cos_half = np.cos(0.5 * spot_size)
     cone = 2.0 * np.pi * (1.0 - cos_half)
     flux = power / (4.0 * np.pi) * _spot_solid_angle(spot_size, light.blend)
-    smooth = (1.0 - cos_half) * light.blend
-    frame = _frame(axis)
+    par = _params(_frame(axis), np.asarray(light.position, np.float64), cos_half, (1.0 - cos_half) * light.blend)
 
     def emit(key, first, n, total, o, d, f, rng):
         scale = power / (4.0 * np.pi) * cone / total
-        _emit_spot(key, first, n, pos, frame, cos_half, smooth, scale, o, d, f, rng)
+        _emit(SPOT, key, first, n, _with_flux(par, scale), *_NO_MESH, o, d, f, rng)
 
     return Emitter(light.name, flux, emit)
-
-
-@jit
-def _emit_parallel(key, first, n, frame, cos_max, centre, radius, flux, o, d, f, rng):
-    """A sun over a scene without triangles: directions within acos(cos_max) of the frame's axis,
-    starting on a disc of the scene's bounding radius perpendicular to their own direction, 2
-    radii out, which keeps the irradiance uniform. (Sky photons: footprint.emit_sky.)"""
-    buf, state = _block()
-    for a in range(0, n, BLOCK):
-        b = min(n, a + BLOCK)
-        for i in range(a, b):
-            k = i - a
-            r, u0, u1, u2, u3 = _draw4(key, first + i)
-            if cos_max < 1.0:
-                lx, ly, lz = cone_lobe(cos_max, u2, u3)
-                dx, dy, dz = in_frame(lx, ly, lz, frame[0], frame[1], frame[2])
-            else:
-                dx, dy, dz = frame[2]
-            px, py = uniform_disc(u0, u1)
-            t, s = orthonormal_basis(dx, dy, dz)
-            _set(buf, 0, k, centre[0] + radius * (px * t[0] + py * s[0]) - 2.0 * radius * dx,
-                 centre[1] + radius * (px * t[1] + py * s[1]) - 2.0 * radius * dy,
-                 centre[2] + radius * (px * t[2] + py * s[2]) - 2.0 * radius * dz)
-            _set(buf, 3, k, dx, dy, dz)
-            _set(buf, 6, k, flux[0], flux[1], flux[2])
-            state[k] = r
-        _flush(buf, state, a, b, o, d, f, rng)
 
 
 def sun_emitter(light: SunLight, centre: np.ndarray, radius: float, positions: np.ndarray = None,
@@ -245,35 +338,12 @@ def sun_emitter(light: SunLight, centre: np.ndarray, radius: float, positions: n
 
         return Emitter(light.name, flux, emit)
     flux = e * np.pi * radius ** 2
+    par = _params(frame, centre, cos_max, float(radius))
 
     def emit(key, first, n, total, o, d, f, rng):
-        _emit_parallel(key, first, n, frame, cos_max, centre, float(radius), flux / total, o, d, f, rng)
+        _emit(PARALLEL, key, first, n, _with_flux(par, flux / total), *_NO_MESH, o, d, f, rng)
 
     return Emitter(light.name, flux, emit)
-
-
-@jit
-def _emit_area(key, first, n, m, frame, disc, sx, sy, flux, o, d, f, rng):
-    t, s, normal = frame
-    buf, state = _block()
-    for a in range(0, n, BLOCK):
-        b = min(n, a + BLOCK)
-        for i in range(a, b):
-            k = i - a
-            r, u0, u1, u2, u3 = _draw4(key, first + i)
-            if disc:
-                px, py = uniform_disc(u0, u1)
-                lx, ly = 0.5 * sx * px, 0.5 * sy * py
-            else:
-                lx, ly = (u0 - 0.5) * sx, (u1 - 0.5) * sy
-            _set(buf, 0, k, m[0, 0] * lx + m[0, 1] * ly + m[0, 3], m[1, 0] * lx + m[1, 1] * ly + m[1, 3],
-                 m[2, 0] * lx + m[2, 1] * ly + m[2, 3])
-            lx, ly, lz = cosine_lobe(u2, u3)
-            dx, dy, dz = in_frame(lx, ly, lz, t, s, normal)
-            _set(buf, 3, k, dx, dy, dz)
-            _set(buf, 6, k, flux[0], flux[1], flux[2])
-            state[k] = r
-        _flush(buf, state, a, b, o, d, f, rng)
 
 
 def area_emitter(light: AreaLight) -> Emitter:
@@ -291,36 +361,12 @@ def area_emitter(light: AreaLight) -> Emitter:
     sx = float(light.size_x)
     sy = float(light.size_x if shape in ("SQUARE", "DISK") else light.size_y)
     disc = shape in ("DISK", "ELLIPSE")
-    frame = _frame(normal)
+    par = _params(_frame(normal), a=sx, b=sy, c=float(disc), m=m)
 
     def emit(key, first, n, total, o, d, f, rng):
-        _emit_area(key, first, n, m, frame, disc, sx, sy, power / total, o, d, f, rng)
+        _emit(AREA, key, first, n, _with_flux(par, power / total), *_NO_MESH, o, d, f, rng)
 
     return Emitter(light.name, power, emit)
-
-
-@jit
-def _emit_mesh(key, first, n, cdf, p, normal, tri_flux, offset, o, d, f, rng):
-    """tri_flux: each triangle's RGB flux over its probability and over total_count."""
-    buf, state = _block()
-    for a in range(0, n, BLOCK):
-        b = min(n, a + BLOCK)
-        for i in range(a, b):
-            k = i - a
-            r, u0, u1, u2, u3 = _draw4(key, first + i)
-            r, u4, u5 = uniform2(r)
-            lo = search_cdf(cdf, u0)
-            b0, b1, b2 = uniform_triangle(u1, u2)
-            side = 1.0 if u5 < 0.5 else -1.0
-            nx, ny, nz = side * normal[lo, 0], side * normal[lo, 1], side * normal[lo, 2]
-            _set(buf, 0, k, b0 * p[lo, 0, 0] + b1 * p[lo, 1, 0] + b2 * p[lo, 2, 0] + offset * nx,
-                 b0 * p[lo, 0, 1] + b1 * p[lo, 1, 1] + b2 * p[lo, 2, 1] + offset * ny,
-                 b0 * p[lo, 0, 2] + b1 * p[lo, 1, 2] + b2 * p[lo, 2, 2] + offset * nz)
-            dx, dy, dz = cosine_hemisphere(nx, ny, nz, u3, u4)
-            _set(buf, 3, k, dx, dy, dz)
-            _set(buf, 6, k, tri_flux[lo, 0], tri_flux[lo, 1], tri_flux[lo, 2])
-            state[k] = r
-        _flush(buf, state, a, b, o, d, f, rng)
 
 
 def emissive_triangles(scene: Scene):
@@ -353,9 +399,10 @@ def mesh_emitter(scene: Scene, offset: float) -> Emitter | None:
     # Picked in proportion to mean flux: a photon carries its triangle's RGB flux over its probability.
     per_pick = tri_flux * (w.sum() / w)[:, None]
     p, normal = np.ascontiguousarray(p), np.ascontiguousarray(normal)
+    par = _params(a=float(offset))
 
     def emit(key, first, n, total, o, d, f, rng):
-        _emit_mesh(key, first, n, cdf, p, normal, per_pick / total, float(offset), o, d, f, rng)
+        _emit(MESH, key, first, n, par, cdf, p, normal, per_pick / total, o, d, f, rng)
 
     return Emitter("emissive meshes", flux, emit)
 

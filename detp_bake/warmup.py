@@ -2,11 +2,11 @@
 before the user asks for a bake, by baking a tiny scene nobody sees.
 
 Numba compiles a kernel on its first call, per argument types: the first bake of a Blender
-session used to wait about 22 s on two cores for disc_index, sphere_cache, the tracer and every
-light type's emitter. The extension points NUMBA_CACHE_DIR at its user folder (the root
-__init__.py), so a later session only loads the compiled code; this module does even that in a
-background thread when the extension is enabled, holding the job lock (job.py) so that no bake
-shares numba's thread pool with it. A bake started meanwhile waits for it, saying so.
+session used to wait about 22 s on two cores for disc_index, sphere_cache, the tracer and the
+emitters. The extension points NUMBA_CACHE_DIR at its user folder (the root __init__.py), so a
+later session only loads the compiled code; this module does even that in a background thread
+when the extension is enabled, holding the job lock (job.py) so that no bake shares numba's
+thread pool with it. A bake started meanwhile waits for it, saying so.
 """
 from __future__ import annotations
 
@@ -32,7 +32,9 @@ def _placed(scale: float, at) -> np.ndarray:
 
 def _box() -> Scene:
     """A closed unit box seen from inside (12 triangles, each face a cell of a 3 × 2 UV atlas),
-    lit by one light of every kind, an emissive triangle and a sky."""
+    lit by one light of every kind, an emissive triangle and a sky. The same kernels emit the
+    point, spot, area and mesh photons (lights._emit): a new light type adds no emitter compile.
+    The sun on its footprint and the sky have kernels of their own."""
     faces = []  # (corner order) per face, inward
     c = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
     for quad in ((0, 1, 2, 3), (4, 7, 6, 5), (0, 4, 5, 1), (1, 5, 6, 2), (2, 6, 7, 3), (3, 7, 4, 0)):

@@ -142,6 +142,30 @@ def test_the_preview_refines_and_the_final_lightmaps_are_those_of_a_bake_without
     assert np.allclose(last, plain.images["Floor"], rtol=1e-5, atol=1e-7)
 
 
+def test_the_photon_map_previews_its_gather_so_far_and_ends_as_a_bake_without_previews(monkeypatch):
+    """Each preview gathers over the hits so far, scaled to the share traced: blurrier than the
+    final lightmap but as bright. The last one is the final gather; previews leave it untouched."""
+    settings = _settings(estimator="photon_map")
+    monkeypatch.setattr(job_mod, "SLOW_PREVIEW_WAIT", 0.0)  # every batch, to see each one
+    events = list(job_mod.Job(_scene(), settings, None, preview=1e-9).events())
+    previews = [e for e in events if isinstance(e, job_mod.Preview)]
+    assert [p.photons for p in previews] == [BATCH * (i + 1) for i in range(PHOTONS // BATCH)]
+    assert all(p.estimator == "photon_map" for p in previews)
+    first, last = previews[0].images["Floor"], previews[-1].images["Floor"]
+    assert first.shape == (16, 16, 3) and not np.array_equal(first, last)
+    assert abs(first.mean() / last.mean() - 1.0) < 0.1
+    final = events[-1].results["photon_map"]
+    plain = job_mod.Job(_scene(), settings, None).run().results["photon_map"]
+    assert np.array_equal(final.value, plain.value)
+    for name in plain.images:
+        assert np.array_equal(final.images[name], plain.images[name])
+        assert np.array_equal(previews[-1].images[name], plain.images[name].astype(np.float32))
+    # At the real rate a preview waits SLOW_PREVIEW_WAIT times its own gather: here, for ever.
+    monkeypatch.setattr(job_mod, "SLOW_PREVIEW_WAIT", 1e9)
+    events = list(job_mod.Job(_scene(), settings, None, preview=1e-9).events())
+    assert [e.photons for e in events if isinstance(e, job_mod.Preview)] == [BATCH]
+
+
 def test_a_job_started_during_the_warm_up_waits_for_it_and_then_runs(tmp_path):
     """The warm-up (every kernel compiled on a tiny scene) holds the lock without refusing jobs:
     a bake clicked meanwhile starts once it is done; a second warm-up does not start."""

@@ -1,4 +1,6 @@
 """Emission: total flux per light type in Cycles' units, and the photon share-out."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -93,3 +95,50 @@ def test_sun_photons_start_on_the_footprint_and_nearly_all_hit():
     x = r.texels.position
     interior = (np.abs(x[:, 0]) < 0.35) & (np.abs(x[:, 1]) < 0.35)
     assert np.isclose(r.value[interior, 0].mean() * np.pi, 2.0 * np.cos(tilt), rtol=0.02)
+
+
+def _every_kind():
+    """One emitter per light kind and variant of the merged kernel (lights._emit)."""
+    def placed(scale, at):
+        c, s = np.cos(0.7), np.sin(0.7)
+        m = np.eye(4)
+        m[:3, :3] = scale * np.array([[c, 0.0, s], [0.3 * s, c, -0.2], [-s, 0.4, c]])
+        m[:3, 3] = at
+        return m
+    power, axis, centre = np.array([10.0, 20.0, 30.0]), np.array([0.2, -0.3, -1.0]), np.array([0.5, -0.2, 1.0])
+    out = {"point": lights.point_emitter(PointLight("P", np.array([0.3, -1.2, 2.0]), power)),
+           "sphere": lights.point_emitter(PointLight("P", np.array([0.3, -1.2, 2.0]), power, radius=0.25)),
+           "spot": lights.spot_emitter(SpotLight("S", np.ones(3), axis, power, np.radians(70), 0.0)),
+           "spot_blend": lights.spot_emitter(SpotLight("S", np.ones(3), -axis, power, np.radians(170), 0.4)),
+           "parallel": lights.sun_emitter(SunLight("U", axis, np.full(3, 2.0)), centre, 4.0),
+           "parallel_wide": lights.sun_emitter(SunLight("U", -axis[[1, 2, 0]], np.full(3, 2.0), 0.1), centre, 4.0)}
+    for shape in ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE"):
+        out[shape.lower()] = lights.area_emitter(AreaLight("A", placed(1.7, (0.1, 0.2, 2.5)), shape, 0.8, 0.3, power))
+    sc = make_scene([("Plane", grid(2, 2, 3), 0.5, True)], [])
+    sc.emission = np.zeros((sc.triangle_count, 3))
+    sc.emission[[1, 4, 7]] = [[1.0, 2.0, 3.0], [5.0, 0.5, 0.1], [0.2, 0.2, 0.2]]
+    out["mesh"] = lights.mesh_emitter(sc, 1e-3)
+    return out
+
+
+ROWS = np.r_[0:4, 254:260]  # both sides of the first block's end
+
+
+def _photons(emitter):
+    o, d, f = (np.empty((260, 3)) for _ in range(3))
+    rng = np.empty(260, np.uint64)
+    emitter.emit(np.uint64(0x123456789ABCDEF1), 12345, 260, 1000.0, o, d, f, rng)
+    return {"o": o[ROWS], "d": d[ROWS], "f": f[ROWS], "rng": rng[ROWS]}
+
+
+def test_every_kind_emits_the_photons_of_its_former_kernel():
+    """The photons of each light kind as its own kernel drew them before the kinds shared one
+    (tests/data/emission.npz, saved then): the same draws in the same order. Equal bit for bit
+    where saved; to 1e-12 here, as another CPU may fuse multiply-adds differently."""
+    saved = np.load(Path(__file__).parent / "data" / "emission.npz")
+    for name, emitter in _every_kind().items():
+        for key, value in _photons(emitter).items():
+            if key == "rng":
+                assert np.array_equal(value, saved[f"{name}_{key}"]), name
+            else:
+                assert np.allclose(value, saved[f"{name}_{key}"], rtol=1e-12, atol=1e-14), (name, key)

@@ -72,7 +72,7 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
                           description="Files written per object")
     live_preview: BoolProperty(name="Live Preview", default=True,
                                description="Show the lightmaps refining on the objects while the bake runs "
-                                           "(DETP estimators; Esc restores the materials)")
+                                           "(the photon map's less often; Esc restores the materials)")
     live_preview_interval: FloatProperty(name="Preview Every", default=1.0, min=0.1, soft_max=10.0,
                                          subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE",
                                          description="Seconds between live preview updates")

@@ -89,6 +89,9 @@ class Estimator:
     # Segments an estimator gathers before it works through them: the bake reads its sums (for the
     # noise estimate) no more often than that, so the reading costs no extra work.
     group_segments = 0
+    # The live preview's `current` gathers over every hit so far, not just reads sums: worth
+    # refreshing less often (job.py).
+    slow_preview = False
     bytes_per_texel = 160  # memory an estimator keeps per texel (discs, index, sums): for the estimate
 
     def __init__(self, texels: TexelSet, settings: EstimatorSettings,
@@ -119,6 +122,12 @@ class Estimator:
     def absorb(self, sums: dict) -> None:
         """Add sums made by `take` (of this estimator or of one built alike on another machine)."""
         raise NotImplementedError
+
+    def current(self, sums: dict, progress: Optional[Callable[[float], None]] = None) -> np.ndarray:
+        """For a live preview: the irradiance (N, 3) of the batches whose `take` sums were added
+        into `sums` (the bake's running totals), not yet divided by the share they cover. `sums`
+        stays as it is, so the finished bake is the same with or without previews."""
+        return sums["irradiance"]
 
 
 REGISTRY: dict[str, type[Estimator]] = {}

@@ -4,7 +4,7 @@ E(x) = Σ Φ_p / (π r_k²) over the k − 1 nearest hits that arrive from the f
 on a surface facing the same way; r_k, the distance to the k-th hit, only sets the area (counting
 the k-th photon too over-estimates: García, Ureña and Sbert 2012). Relative noise is about 1/√k
 whatever the photon count; more photons only shrink r_k. It needs every hit at once, so it keeps
-them all until `finish`.
+them all until `finish`; a live preview gathers over the hits so far (`current`).
 """
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ class PhotonMap(Estimator):
     label = "Photon Map"
     description = "Jensen's k-nearest-neighbour photon map: noisy, darkens edges"
     stores_hits = True
+    slow_preview = True
     baseline = True
 
     @classmethod
@@ -47,12 +48,21 @@ class PhotonMap(Estimator):
         self._parts.extend(sums["parts"])
 
     def finish(self):
+        parts, self._parts = self._parts, []
+        return self._gather(parts, self.progress)
+
+    def current(self, sums, progress=None):
+        """The gather over the hits so far. Their flux is the share of the bake traced, which the
+        bake divides by (as a stop keeps it): fewer hits put the k-th neighbour farther away, so a
+        preview is blurrier than the final lightmap, not darker."""
+        return self._gather(sums.get("parts", []), progress or (lambda fraction: None)).irradiance
+
+    def _gather(self, parts, progress):
         t0 = time.perf_counter()
         n = len(self.texels)
         irradiance = np.zeros((n, 3))
-        pos, wdir, flux, hnorm = (np.concatenate([p[i] for p in self._parts]) if self._parts
+        pos, wdir, flux, hnorm = (np.concatenate([p[i] for p in parts]) if parts
                                   else np.zeros((0, 3), np.float32) for i in range(4))
-        self._parts = []
         hits = len(pos)
         k = min(int(self.settings.k), hits)
         counters = {"hits": hits, "k": k}
@@ -79,7 +89,7 @@ class PhotonMap(Estimator):
             total = np.einsum("nk,nkc->nc", ok.astype(np.float64), flux[near].astype(np.float64))
             r2 = np.maximum(dist[:, k - 1], 1e-12) ** 2
             irradiance[a:b] = total / (np.pi * r2)[:, None]
-            self.progress(b / n)
+            progress(b / n)
         counters.update(photons_used=used, seconds_build=t1 - t0,
                         seconds_query=time.perf_counter() - t1)
         return Estimate(irradiance, counters)
