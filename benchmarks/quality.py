@@ -103,7 +103,8 @@ def label(method: str) -> str:
     name, _, variant = method.partition("/")
     return {"": f"`{name}`: shadow rays + estimator + OIDN (default)",
             "no-denoise": f"`{name}`: shadow rays + estimator, no denoise",
-            "photons": f"`{name}`: photons only (paper's mode), raw"}[variant]
+            "photons": f"`{name}`: photons only (paper's mode), raw",
+            "every-texel": f"`{name}`: the default with the estimator at every texel"}[variant]
 
 
 def timed(fn):
