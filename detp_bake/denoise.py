@@ -152,14 +152,23 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     if filter == "RTLightmap" and (albedo is not None or normal is not None):
         raise BakeError("denoise: the RTLightmap filter takes no albedo or normal guide; use RT")
 
-    # Irradiance is never negative; OIDN's HDR mode assumes so.
-    src = np.maximum(_covered("lightmap", image, mask), 0.0)
+    # Irradiance is never negative; OIDN's HDR mode assumes so. Buffers are reused in place
+    # (the same numbers): at 2048² each (H, W, 3) copy is 50 MB.
+    src = _covered("lightmap", image, mask)
+    np.maximum(src, 0.0, out=src)
     covered = src[mask]
-    out = np.zeros_like(image)
     if not covered.any():  # all black stays black: OIDN returns up to 0.03 for an all-0 input
-        return out
+        return np.zeros_like(image)
+    w = raw_mean = None
+    if keep_energy:
+        w = None if weights is None else np.asarray(weights, np.float64)[mask]
+        if w is not None and not w.sum() > 0:
+            w = None
+        raw_mean = np.average(covered, axis=0, weights=w)
+    del covered
 
     color = fill_gutter(src, mask)
+    del src
     kwargs = {}
     if filter == "RT":
         alb = (np.ones_like(image) if albedo is None
@@ -177,20 +186,17 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
         raise BakeError(f"denoise: OIDN failed on a {image.shape[1]}x{image.shape[0]} lightmap "
                         f"({filter}): {exc}") from exc
     del color, kwargs
-    if not np.isfinite(result[mask]).all():
+    den = result[mask]
+    if not np.isfinite(den).all():
         raise BakeError(f"denoise: OIDN returned non-finite texels ({filter})")
-
-    den = np.maximum(result[mask], 0.0)
+    np.maximum(den, 0.0, out=den)
     if keep_energy:
-        w = None if weights is None else np.asarray(weights, np.float64)[mask]
-        if w is not None and not w.sum() > 0:
-            w = None
-        raw_mean = np.average(covered, axis=0, weights=w)
         den_mean = np.average(den, axis=0, weights=w)
         scale = np.where(den_mean > 0, raw_mean / np.where(den_mean > 0, den_mean, 1.0), 1.0)
-        den = (den * scale).astype(np.float32)
-    out[mask] = den
-    return dilate(out, mask, margin)
+        np.multiply(den, scale, out=den, casting="unsafe")  # in float64, rounded once to float32
+    result.fill(0.0)
+    result[mask] = den
+    return dilate(result, mask, margin)
 
 
 _device = None
