@@ -495,7 +495,8 @@ def _blocks(tracer: PhotonTracer, runs: dict, expected_segments: int) -> list[ra
 
 def _worker_bytes(need: memory.Estimate, texels, runs, blocks) -> tuple[int, int]:
     """(bytes a worker keeps for a bake, bytes one block's sums add), for sizing a cluster's units."""
-    fixed = need.total - need.parts.get("photon map hits", 0) - need.parts["lightmap images"]
+    fixed = need.total - need.parts.get("photon map hits", 0) - need.parts["lightmap images"] \
+        - need.parts.get("denoiser", 0)
     per_block = sum(len(texels) * 3 * 8 for est in runs.values() if est.streaming)
     if blocks and any(est.stores_hits for est in runs.values()):
         per_block += need.parts.get("photon map hits", 0) // len(blocks)
@@ -612,14 +613,16 @@ def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) ->
     per_texel = {n: estimators.get(n).bytes_per_texel for n in names}
     hits = int(settings.photons * per_photon_kept) if any(estimators.get(n).stores_hits for n in names) else 0
     geometry = scene.positions.nbytes + scene.normals.nbytes + scene.uvs.nbytes + 24 * scene.triangle_count
+    denoised = max((o.resolution * o.resolution for o in scene.objects if o.bake), default=0) \
+        if settings.denoise and denoise_mod.available() else 0
     need = memory.estimate(pixels, per_texel, batch, per_photon, per_photon_kept,
-                           settings.threads or os.cpu_count() or 1, hits, geometry)
+                           settings.threads or os.cpu_count() or 1, hits, geometry, denoised)
     budget = settings.memory_budget_mb * 1e6 if settings.memory_budget_mb else 0.8 * memory.available_bytes()
     if budget and need.total > budget:
         advice = []
         if hits and need.parts.get("photon map hits", 0) > 0.3 * need.total:
             advice.append("a DETP estimator (they stream photons) or fewer photons")
-        if need.parts["texels"] + need.parts["lightmap images"] > 0.3 * need.total:
+        if need.parts["texels"] + need.parts["lightmap images"] + need.parts.get("denoiser", 0) > 0.3 * need.total:
             advice.append("a lower resolution")
         if need.parts["photon batches"] + need.parts["stream logs"] > 0.3 * need.total:
             advice.append("fewer bounces or a smaller batch")
