@@ -5,7 +5,7 @@
 
 Each bake runs in a fresh process (the peak resident memory, getrusage, only grows): once at a tiny
 resolution and once at --resolution, on a floor under a ceiling lit by a point light (one baked
-lightmap whose UVs fill the square but a 5 % gutter, so texels are about 0.8 of the pixels). Bytes per texel = (peak at --resolution −
+lightmap whose UVs fill the square but a --gutter, 5 %: texels are then 0.81 of the pixels). Bytes per texel = (peak at --resolution −
 peak at the tiny one) / texels, so interpreter, kernels, Embree and photon batches cancel out; the
 estimate's bytes per texel are taken the same way. A sampler thread also records which phase of the
 bake (rasterise, direct, prepare, trace, estimate, finish) held the peak. Prints a table, writes JSON
@@ -29,17 +29,19 @@ if str(ROOT) not in sys.path:
 
 ESTIMATORS = ["disc_index", "sphere_cache", "detp", "photon_map", "hybrid"]
 TINY = 32
+# The brute-force oracle refuses more than 4e10 segment–disc tests: fewer photons for it.
+PHOTONS = {"detp": 4000}
 
 
-def _scene(resolution: int):
+def _scene(resolution: int, gutter: float = 0.05):
     import numpy as np
 
     from detp_bake.scene import BakeObject, PointLight, Scene
 
     def plane(z, flip):
         p = np.array([[[-1, -1, z], [1, -1, z], [1, 1, z]], [[-1, -1, z], [1, 1, z], [-1, 1, z]]], np.float64)
-        # UVs inset by 5 %: a gutter for dilation and the denoiser's fill, as real charts have.
-        uv = 0.05 + 0.9 * np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]]], np.float64)
+        # UVs inset (5 %): a gutter for dilation and the denoiser's fill, as real charts have.
+        uv = gutter + (1 - 2 * gutter) * np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]]], np.float64)
         if flip:
             p, uv = p[:, [0, 2, 1]], uv[:, [0, 2, 1]]
         n = np.broadcast_to([0.0, 0.0, -1.0 if flip else 1.0], p.shape).copy()
@@ -53,7 +55,7 @@ def _scene(resolution: int):
                  world=np.zeros(3), default_bounces=2)
 
 
-def _child(estimator: str, resolution: int, photons: int, denoise: bool) -> dict:
+def _child(estimator: str, resolution: int, photons: int, denoise: bool, gutter: float) -> dict:
     from detp_bake import bake, denoise as denoise_mod, direct, estimators, memory, texels
     from detp_bake.estimators import rise
 
@@ -107,35 +109,37 @@ def _child(estimator: str, resolution: int, photons: int, denoise: bool) -> dict
     watcher = threading.Thread(target=sample, daemon=True)
     watcher.start()
     t0 = time.perf_counter()
-    r = bake.compute(_scene(resolution), settings, progress)
+    r = bake.compute(_scene(resolution, gutter), settings, progress)
     seconds["total"] = time.perf_counter() - t0
     done.set()
     watcher.join()
     parts = r.memory["parts_mb"]
-    texel_mb = sum(v for k, v in parts.items() if k in ("texels", "lightmap images") or k.startswith("estimator"))
+    texel_mb = sum(v for k, v in parts.items() if k in ("texels", "lightmap images", "denoiser")
+                   or k.startswith("estimator"))
     return {"estimator": estimator, "resolution": resolution, "texels": len(r.texels), "peak": memory.peak_bytes(),
             "estimate": r.memory["estimate_mb"] * 1e6, "estimate_texels": texel_mb * 1e6,
             "phases": peaks, "seconds": seconds, "peak_at": where[1], "segments": r.stats.segments}
 
 
-def _run_child(estimator: str, resolution: int, photons: int, denoise: bool) -> dict:
+def _run_child(estimator: str, resolution: int, photons: int, denoise: bool, gutter: float) -> dict:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     proc = subprocess.run([sys.executable, __file__, "--child", estimator, str(resolution), str(photons),
-                           str(int(denoise))],
+                           str(int(denoise)), str(gutter)],
                           capture_output=True, text=True, env=env, cwd=ROOT)
     if proc.returncode != 0:
         raise SystemExit(f"{estimator} at {resolution}: failed\n{proc.stdout[-2000:]}{proc.stderr[-3000:]}")
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def measure(estimator: str, resolution: int, photons: int, denoise: bool = True) -> dict:
+def measure(estimator: str, resolution: int, photons: int, denoise: bool = True, gutter: float = 0.05) -> dict:
     """Bytes per texel of `estimator`: estimated and measured, from a tiny and a large bake."""
-    _run_child(estimator, TINY, photons, denoise)  # warms the kernel cache
-    small = _run_child(estimator, TINY, photons, denoise)
-    large = _run_child(estimator, resolution, photons, denoise)
+    _run_child(estimator, TINY, photons, denoise, gutter)  # warms the kernel cache
+    small = _run_child(estimator, TINY, photons, denoise, gutter)
+    large = _run_child(estimator, resolution, photons, denoise, gutter)
     texels = large["texels"] - small["texels"]
     peak_phase = max(large["phases"], key=large["phases"].get)
     return {"estimator": estimator, "resolution": resolution, "texels": large["texels"],
+            "coverage": large["texels"] / resolution ** 2,
             "estimate_per_texel": (large["estimate_texels"] - small["estimate_texels"]) / texels,
             "measured_per_texel": (large["peak"] - small["peak"]) / texels,
             "peak_mb": large["peak"] / 1e6, "estimate_mb": large["estimate"] / 1e6, "peak_phase": peak_phase,
@@ -151,16 +155,19 @@ def main(argv=None):
     ap.add_argument("--photons", type=int, default=20000)
     ap.add_argument("--json", default=str(ROOT / "benchmarks" / "results" / "memory.json"))
     ap.add_argument("--no-denoise", action="store_true", help="bake without OIDN")
-    ap.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
+    ap.add_argument("--gutter", type=float, default=0.05, help="UV inset of the lightmap (0: no gutter)")
+    ap.add_argument("--child", nargs=5, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
-        print(json.dumps(_child(args.child[0], int(args.child[1]), int(args.child[2]), bool(int(args.child[3])))))
+        print(json.dumps(_child(args.child[0], int(args.child[1]), int(args.child[2]), bool(int(args.child[3])),
+                                float(args.child[4]))))
         return
     rows = []
     print(f"{'estimator':<13} {'texels':>10} {'estimate B/texel':>17} {'measured B/texel':>17} {'ratio':>6} "
           f"{'peak MB':>8}  peak phase, where")
     for name in args.estimators.split(","):
-        row = measure(name, args.resolution, args.photons, not args.no_denoise)
+        row = measure(name, args.resolution, min(args.photons, PHOTONS.get(name, args.photons)), not args.no_denoise,
+                      args.gutter)
         rows.append(row)
         print(f"{name:<13} {row['texels']:>10,} {row['estimate_per_texel']:>17.0f} {row['measured_per_texel']:>17.0f} "
               f"{row['estimate_per_texel'] / row['measured_per_texel']:>6.2f} {row['peak_mb']:>8.0f}  "
@@ -168,7 +175,7 @@ def main(argv=None):
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"resolution": args.resolution, "photons": args.photons, "cores": os.cpu_count(),
-                               "denoise": not args.no_denoise, "results": rows}, indent=2))
+                               "denoise": not args.no_denoise, "gutter": args.gutter, "results": rows}, indent=2))
     print(f"wrote {out}")
 
 
