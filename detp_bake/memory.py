@@ -86,12 +86,15 @@ def estimate(pixels: int, estimator_bytes: dict, batch: int, per_photon_all: flo
         "geometry": geometry_bytes,
     }
     for name, per_texel in estimator_bytes.items():
-        parts[f"estimator {name}"] = int(pixels * per_texel)
+        parts[f"estimator {name} texels"] = int(pixels * per_texel)  # its state per texel
     if stored_hits:
         parts["photon map hits"] = stored_hits * HIT_BYTES
     if denoised_pixels:
-        parts["denoiser"] = int(min(denoised_pixels * OIDN_BYTES_PER_PIXEL, OIDN_MOST)
-                                + denoised_pixels * DENOISE_PIXEL_BYTES)
+        # Each estimator is let go before its lightmaps are denoised (bake.py): the denoiser needs
+        # only what is more than the smallest estimator's state, which it takes over.
+        denoiser = min(denoised_pixels * OIDN_BYTES_PER_PIXEL, OIDN_MOST) + denoised_pixels * DENOISE_PIXEL_BYTES
+        freed = min((pixels * b for b in estimator_bytes.values()), default=0)
+        parts["denoiser"] = int(max(0, denoiser - freed))
     return Estimate(pixels, parts)
 
 
@@ -118,7 +121,16 @@ def geometry_budget(memory_budget_mb: int = 0) -> int:
 
 
 def peak_bytes() -> int:
-    """This process's peak resident memory so far (0 where the system cannot say)."""
+    """This process's peak resident memory so far (0 where the system cannot say). Linux's
+    VmHWM first: getrusage's ru_maxrss carries over from the parent through fork and exec, so a
+    bake started by a large process (a test run) would report that process's peak."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
     if resource is None:
         return 0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
