@@ -1,14 +1,15 @@
 """Memory per texel: the bake's estimate (memory.py) against the peak it really reached.
 
-    python benchmarks/memory.py [--resolution 2048] [--estimators disc_index,sphere_cache,detp,photon_map]
-                                [--photons 20000] [--json OUT]
+    python benchmarks/memory.py [--resolution 2048] [--estimators disc_index,sphere_cache,...]
+                                [--photons 20000] [--no-denoise] [--gutter 0.05] [--json OUT]
 
-Each bake runs in a fresh process (the peak resident memory, getrusage, only grows): once at a tiny
-resolution and once at --resolution, on a floor under a ceiling lit by a point light (one baked
-lightmap whose UVs fill the square but a --gutter, 5 %: texels are then 0.81 of the pixels). Bytes per texel = (peak at --resolution −
-peak at the tiny one) / texels, so interpreter, kernels, Embree and photon batches cancel out; the
-estimate's bytes per texel are taken the same way. A sampler thread also records which phase of the
-bake (rasterise, direct, prepare, trace, estimate, finish) held the peak. Prints a table, writes JSON
+Each bake runs in a fresh process (its peak resident memory is its own): once at 32² and once at
+--resolution, on a floor under a ceiling lit by a point light (one baked lightmap whose UVs fill
+the square but a --gutter, 5 %: texels are then 0.81 of the pixels). Bytes per texel = (peak at
+--resolution − peak at 32²) / texels, so interpreter, kernels, Embree and photon batches cancel
+out; the estimate's bytes per texel are taken the same way. A sampler thread also records which
+phase of the bake (rasterise, direct, clearance, rise, build, trace+estimate, images, denoise) held
+the peak, and the line the main thread was on. Prints a table, writes JSON
 (default benchmarks/results/memory.json).
 """
 from __future__ import annotations

@@ -622,7 +622,8 @@ def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) ->
         advice = []
         if hits and need.parts.get("photon map hits", 0) > 0.3 * need.total:
             advice.append("a DETP estimator (they stream photons) or fewer photons")
-        if need.parts["texels"] + need.parts["lightmap images"] + need.parts.get("denoiser", 0) > 0.3 * need.total:
+        per_pixel = need.parts["texels"] + need.parts["lightmap images"] + need.parts.get("denoiser", 0)
+        if per_pixel > 0.3 * need.total:
             advice.append("a lower resolution")
         if need.parts["photon batches"] + need.parts["stream logs"] > 0.3 * need.total:
             advice.append("fewer bounces or a smaller batch")
