@@ -1,10 +1,10 @@
 """How much memory a bake will need, said before any long work, and what it really used.
 
 The peak is the sum of what lives at once: the texels (their records, the lightmap images before
-and after denoising, the direct light, the disc clearance), the estimator's per-texel state, the
-denoiser's scratch and images for the largest lightmap, a
-few photon batches (the one being filled, the one being estimated, a spare: photons.py), each
-thread's stream log, and for the photon map every stored hit. Batches are bounded in segments, not
+and after denoising, the direct light), the estimator's per-texel state, the denoiser's scratch
+and images for the largest lightmap (beyond the estimator state let go before it), a few photon
+batches (the one being filled, the one being estimated, a spare: photons.py), each thread's
+stream log, and for the photon map every stored hit. Batches are bounded in segments, not
 photons (`batch_photons`): in a closed white room with a thousand bounces a photon makes a
 thousand segments, and a batch of 100,000 photons would need gigabytes.
 """
