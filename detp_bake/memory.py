@@ -28,7 +28,7 @@ BATCH_SETS = 3  # record sets alive at once (photons._ArrayPool.KEEP)
 # E/π (float32 RGB, 24). What an estimator adds (its discs, index and sums, the discs' clearance,
 # the sums in flight, the noise sums, what its build leaves behind) is its `bytes_per_texel`.
 # Measured with benchmarks/memory.py (2048², a 5 % gutter): a disc_index bake needed about 500
-# bytes a texel before issue 10's cuts, about 290 after; the figures here are 1.1 times the
+# bytes a texel before issue 10's cuts, about 300 after; the figures here are 1.1 times the
 # measured peaks, so the estimate stays above them when every pixel is a texel.
 TEXEL_BYTES = 61 + 2 * 12
 PIXEL_BYTES = 3 * 12 + 2  # raw, denoised and dilated float32 RGB, two masks
