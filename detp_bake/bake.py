@@ -137,7 +137,7 @@ class BakeResult:
     masks: dict  # object name -> (H, W) bool, texels covered by the object's UVs
     centre_masks: dict  # object name -> (H, W) bool, texels whose centre lies on a UV triangle
     texels: texels_mod.TexelSet
-    value: np.ndarray  # (N, 3) E/π per texel, before dilation
+    value: np.ndarray  # (N, 3) float32 E/π per texel, before dilation
     stats: TraceStats
     counters: dict
     seconds: dict
@@ -415,34 +415,37 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
                 stopped_by = "target_noise"
                 break
     tracer.stats, tracer.batches_done = totals.stats, totals.batches
+    part = None
     for name, est in runs.items():
-        est.absorb(totals.sums[name])
+        est.absorb(totals.sums.pop(name))  # the sums are the estimator's now: one copy, not two
         spent[name] += totals.seconds[name]
     share = tracer.share
     estimate_progress(0.0)
     results = {}
-    for name, est in runs.items():
+    for name in names:
+        est = runs[name]
         t1 = time.perf_counter()
         out = est.finish()
-        if share < 1.0:  # stopped early: the batches so far stand for the whole bake
-            out.irradiance = out.irradiance / share
+        # The estimator's per-texel state goes before the images are made: the class still
+        # answers what the rest of the loop asks (streaming, discs, stores_hits, fixed_noise).
+        runs[name] = type(est)
+        est = None
         if sites.spacing > 1:
             out.irradiance = sites.expand(out.irradiance)
+        value = _value(out, direct_e, share)
         spent[name] += time.perf_counter() - t1
         seconds = {"rasterise": rasterise_seconds, "direct": direct_info.get("seconds", 0.0),
                    "clearance": clearance_seconds, "build": build[name], "trace": tracer.stats.seconds,
                    "estimate": spent[name]}
-        result = _finish(replace(settings, estimator=name), bounces, texels, out, tracer, seconds,
-                         direct_e, direct_info)
+        result = _finish(replace(settings, estimator=name), bounces, texels, value, out.counters, tracer, seconds,
+                         direct_info)
+        out = value = None
         result.stopped_by = stopped_by
         result.share = share
         result.export = dict(getattr(scene, "export_stats", None) or {})
         result.cluster = dict(cluster.last) if cluster is not None else {}
-        result.memory = {"estimate_mb": round(need.total / 1e6, 1),
-                         "parts_mb": {k: round(v / 1e6, 1) for k, v in need.parts.items()},
-                         "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": batch_size}
         if name in noise:
-            result.noise = noise[name].relative(at.lightmaps, sites.of_sites(result.value) * np.pi)
+            result.noise = noise[name].relative(at.lightmaps, sites.of_sites(result.value), scale=np.pi)
         elif runs[name].fixed_noise(settings.estimator_settings) is not None:
             fixed = runs[name].fixed_noise(settings.estimator_settings)
             result.noise = {lm.name: fixed for lm in texels.lightmaps}
@@ -455,6 +458,9 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
             result.warnings.append(f"setting 'k' = {k} is more than the {result.counters['hits']:,} photons the "
                                    "photon map stored: every texel averaged all of them (a blur over the scene); "
                                    "trace more photons or lower k")
+        result.memory = {"estimate_mb": round(need.total / 1e6, 1),
+                         "parts_mb": {k: round(v / 1e6, 1) for k, v in need.parts.items()},
+                         "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": batch_size}
         results[name] = result
     if offset.any():
         texels.position += offset  # back where the texels are, in world space
@@ -500,6 +506,8 @@ class Totals:
             for key, value in sums.items():
                 if key in total:
                     total[key] += value
+                elif isinstance(value, np.ndarray) and value.flags.writeable and value.flags.owndata:
+                    total[key] = value  # an estimator's take() let it go: adopted, not copied
                 else:  # a copy: what came over the wire may be read-only
                     total[key] = value.copy() if isinstance(value, (np.ndarray, list)) else value
             self.seconds[name] += part.seconds[name]
@@ -551,7 +559,8 @@ def _blocks(tracer: PhotonTracer, runs: dict, expected_segments: int) -> list[ra
 
 def _worker_bytes(need: memory.Estimate, texels, runs, blocks) -> tuple[int, int]:
     """(bytes a worker keeps for a bake, bytes one block's sums add), for sizing a cluster's units."""
-    fixed = need.total - need.parts.get("photon map hits", 0) - need.parts["lightmap images"]
+    fixed = need.total - need.parts.get("photon map hits", 0) - need.parts["lightmap images"] \
+        - need.parts.get("denoiser", 0)
     per_block = sum(len(texels) * 3 * 8 for est in runs.values() if est.streaming)
     if blocks and any(est.stores_hits for est in runs.values()):
         per_block += need.parts.get("photon map hits", 0) // len(blocks)
@@ -629,10 +638,21 @@ def _snapshot_value(sites, current, direct_e, share) -> np.ndarray:
     return (irradiance if direct_e is None else irradiance + direct_e) / np.pi
 
 
-def _finish(settings, bounces, texels, est, tracer, seconds, direct_e=None, direct_info=None) -> BakeResult:
-    """E/π per texel (Cycles' Diffuse bake unit, DIRECT+INDIRECT, no COLOR), as dilated images."""
-    irradiance = est.irradiance if direct_e is None else est.irradiance + direct_e
-    value = irradiance / np.pi
+def _value(est, direct_e, share) -> np.ndarray:
+    """E/π per texel (Cycles' Diffuse bake unit, DIRECT+INDIRECT, no COLOR): summed in float64,
+    kept as float32 (the images' precision); the estimate's own array is let go."""
+    irradiance, est.irradiance = est.irradiance, None
+    # stopped early (share < 1): the batches so far stand for the whole bake
+    total = irradiance / share if share < 1.0 else np.array(irradiance, np.float64)
+    irradiance = None
+    if direct_e is not None:
+        total += direct_e
+    total /= np.pi
+    return total.astype(np.float32)
+
+
+def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_info=None) -> BakeResult:
+    """The per-texel E/π `value` as dilated (and denoised) images."""
     result_images, raw_images, masks, centre_masks = {}, {}, {}, {}
     warnings = []
     denoise = settings.denoise and denoise_mod.available()
@@ -656,7 +676,7 @@ def _finish(settings, bounces, texels, est, tracer, seconds, direct_e=None, dire
     if denoise:
         seconds["denoise"] = time.perf_counter() - t0
     return BakeResult(settings, bounces, result_images, masks, centre_masks, texels, value, tracer.stats,
-                      est.counters, seconds, direct=dict(direct_info or {}), raw_images=raw_images,
+                      counters, seconds, direct=dict(direct_info or {}), raw_images=raw_images,
                       warnings=warnings)
 
 
@@ -667,14 +687,17 @@ def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) ->
     per_texel = {n: estimators.get(n).bytes_per_texel for n in names}
     hits = int(settings.photons * per_photon_kept) if any(estimators.get(n).stores_hits for n in names) else 0
     geometry = scene.positions.nbytes + scene.normals.nbytes + scene.uvs.nbytes + 24 * scene.triangle_count
+    denoised = max((o.resolution * o.resolution for o in scene.objects if o.bake), default=0) \
+        if settings.denoise and denoise_mod.available() else 0
     need = memory.estimate(pixels, per_texel, batch, per_photon, per_photon_kept,
-                           settings.threads or os.cpu_count() or 1, hits, geometry)
+                           settings.threads or os.cpu_count() or 1, hits, geometry, denoised)
     budget = settings.memory_budget_mb * 1e6 if settings.memory_budget_mb else 0.8 * memory.available_bytes()
     if budget and need.total > budget:
         advice = []
         if hits and need.parts.get("photon map hits", 0) > 0.3 * need.total:
             advice.append("a DETP estimator (they stream photons) or fewer photons")
-        if need.parts["texels"] + need.parts["lightmap images"] > 0.3 * need.total:
+        per_pixel = need.parts["texels"] + need.parts["lightmap images"] + need.parts.get("denoiser", 0)
+        if per_pixel > 0.3 * need.total:
             advice.append("a lower resolution")
         if need.parts["photon batches"] + need.parts["stream logs"] > 0.3 * need.total:
             advice.append("fewer bounces or a smaller batch")

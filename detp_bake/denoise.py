@@ -9,6 +9,10 @@ kept and the gutter is filled again from the denoised ones.
 
 OIDN runs on the CPU device through `pyoidn` (a cffi binding that ships the OIDN 2.5.1 libraries).
 It is imported only when a denoise is asked for, so a bake without denoising never needs it.
+Each lightmap gets its own filter, released when done: OIDN's scratch (about 560 bytes a pixel
+untiled, measured at 512²-2048²) is bounded by MAX_MEMORY_MB, which makes OIDN denoise in
+overlapping tiles (the output is the same, bit for bit, at 1024² and 2048²), and none of it stays
+after the bake. pyoidn's one-call `denoise` keeps its filter and images until the next call.
 
 Measured here (smooth point-light field over three charts, relative RMSE against the field, mean
 of 3 seeds at 128², 1 seed at 512²): with white noise of 10 % / 20 %, RTLightmap gives
@@ -36,6 +40,8 @@ FILTERS = ("RT", "RTLightmap")
 # network sees tens of texels around each output texel, but what it sees past a few rings of a
 # smooth continuation hardly changes the chart's texels; a ring costs ~10 ms at 512² here.
 FILL_RINGS = 16
+MAX_MEMORY_MB = 256  # OIDN's maxMemoryMB: it keeps near it (330 MB measured at 2048²) whatever the size
+QUALITY = {"high": 6, "balanced": 5, "fast": 4}  # OIDN_QUALITY_*
 
 
 def _pyoidn():
@@ -146,14 +152,23 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     if filter == "RTLightmap" and (albedo is not None or normal is not None):
         raise BakeError("denoise: the RTLightmap filter takes no albedo or normal guide; use RT")
 
-    # Irradiance is never negative; OIDN's HDR mode assumes so.
-    src = np.maximum(_covered("lightmap", image, mask), 0.0)
+    # Irradiance is never negative; OIDN's HDR mode assumes so. Buffers are reused in place
+    # (the same numbers): at 2048² each (H, W, 3) copy is 50 MB.
+    src = _covered("lightmap", image, mask)
+    np.maximum(src, 0.0, out=src)
     covered = src[mask]
-    out = np.zeros_like(image)
     if not covered.any():  # all black stays black: OIDN returns up to 0.03 for an all-0 input
-        return out
+        return np.zeros_like(image)
+    w = raw_mean = None
+    if keep_energy:
+        w = None if weights is None else np.asarray(weights, np.float64)[mask]
+        if w is not None and not w.sum() > 0:
+            w = None
+        raw_mean = np.average(covered, axis=0, weights=w)
+    del covered
 
     color = fill_gutter(src, mask)
+    del src
     kwargs = {}
     if filter == "RT":
         alb = (np.ones_like(image) if albedo is None
@@ -163,27 +178,70 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
         if normal is not None:
             kwargs["normal"] = fill_gutter(_covered("normal guide", normal, mask), mask)
 
-    pyoidn = _pyoidn()
+    if quality not in QUALITY:
+        raise BakeError(f"denoise: unknown quality {quality!r} (choose from {', '.join(QUALITY)})")
     try:
-        result = pyoidn.denoise(color, filter_type=filter, quality=quality, **kwargs)
+        result = _run_filter(color, filter, QUALITY[quality], **kwargs)
     except (RuntimeError, ValueError, TypeError, OSError) as exc:  # OSError: OIDN's .so loads now
         raise BakeError(f"denoise: OIDN failed on a {image.shape[1]}x{image.shape[0]} lightmap "
                         f"({filter}): {exc}") from exc
-    result = np.asarray(result, dtype=np.float32)
-    if not np.isfinite(result[mask]).all():
+    del color, kwargs
+    den = result[mask]
+    if not np.isfinite(den).all():
         raise BakeError(f"denoise: OIDN returned non-finite texels ({filter})")
-
-    den = np.maximum(result[mask], 0.0)
+    np.maximum(den, 0.0, out=den)
     if keep_energy:
-        w = None if weights is None else np.asarray(weights, np.float64)[mask]
-        if w is not None and not w.sum() > 0:
-            w = None
-        raw_mean = np.average(covered, axis=0, weights=w)
         den_mean = np.average(den, axis=0, weights=w)
         scale = np.where(den_mean > 0, raw_mean / np.where(den_mean > 0, den_mean, 1.0), 1.0)
-        den = (den * scale).astype(np.float32)
-    out[mask] = den
-    return dilate(out, mask, margin)
+        np.multiply(den, scale, out=den, casting="unsafe")  # in float64, rounded once to float32
+    result.fill(0.0)
+    result[mask] = den
+    return dilate(result, mask, margin)
+
+
+_device = None
+
+
+def _run_filter(color: np.ndarray, filter: str, quality: int, hdr: bool = False, clean_aux: bool = False,
+                albedo: Optional[np.ndarray] = None, normal: Optional[np.ndarray] = None) -> np.ndarray:
+    """OIDN on one image: a filter of its own, its scratch bounded (MAX_MEMORY_MB) and released
+    on return. The CPU device is made once (bakes run one at a time: job.py)."""
+    global _device
+    pyoidn = _pyoidn()
+
+    def check(what):
+        err = _device.get_error()
+        if err:
+            raise RuntimeError(f"{what}: {err}")
+
+    if _device is None:
+        device = pyoidn.Device()
+        device.commit()
+        _device = device
+        check("device")
+    images = {"color": np.ascontiguousarray(color, np.float32)}
+    if albedo is not None:
+        images["albedo"] = np.ascontiguousarray(albedo, np.float32)
+    if normal is not None:
+        images["normal"] = np.ascontiguousarray(normal, np.float32)
+    images["output"] = out = np.empty_like(images["color"])
+    flt = pyoidn.Filter(_device, filter)
+    try:
+        check("filter")
+        for name, img in images.items():
+            flt.set_image(name, img, pyoidn.OIDN_FORMAT_FLOAT3)
+        if filter == "RT":
+            flt.set_bool("hdr", hdr)
+            flt.set_bool("cleanAux", clean_aux)
+        flt.set_int("quality", quality)
+        flt.set_int("maxMemoryMB", MAX_MEMORY_MB)
+        flt.commit()
+        check("commit")
+        flt.execute()
+        check("execute")
+    finally:
+        flt.release()
+    return out
 
 
 def mean_shift(raw: np.ndarray, denoised: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -294,19 +294,19 @@ def _shadow_rays(kind, prm, samples, key, ids, a, b, pos, nrm, geo, eps,
 
 
 @jit
-def _gather(n, occluded, w, owner, out):
+def _gather(n, occluded, w, owner, base, out):
     for k in range(n):
         if occluded[k] < 0:  # embreex: −1 where nothing is in the way
-            i = owner[k]
+            i = owner[k] - base
             out[i, 0] += w[k, 0]
             out[i, 1] += w[k, 1]
             out[i, 2] += w[k, 2]
 
 
 @jit
-def _gather_weighted(n, transmitted, w, owner, out):
+def _gather_weighted(n, transmitted, w, owner, base, out):
     for k in range(n):
-        i = owner[k]
+        i = owner[k] - base
         out[i, 0] += w[k, 0] * transmitted[k]
         out[i, 1] += w[k, 1] * transmitted[k]
         out[i, 2] += w[k, 2] * transmitted[k]
@@ -351,11 +351,13 @@ def transmittance(caster, srf, o: np.ndarray, d: np.ndarray, far: np.ndarray, ep
 
 def geometric_normals(scene: Scene, triangle: np.ndarray, towards: np.ndarray) -> np.ndarray:
     """Unit face normals of `triangle`, flipped to the side of the shading normals `towards`."""
-    p = scene.positions[triangle].astype(np.float64)
+    # Per triangle first, then per texel: no (N, 3, 3) gather of corners for N texels.
+    used, index = np.unique(triangle, return_inverse=True)
+    p = scene.positions[used].astype(np.float64)
     g = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
-    flip = np.sum(g * towards, axis=1) < 0.0
-    g[flip] *= -1.0
+    g = g[index.reshape(-1)]
+    g[np.einsum("ij,ij->i", g, towards) < 0.0] *= -1.0
     return g
 
 
@@ -371,7 +373,9 @@ def texel_ids(texels) -> np.ndarray:
 def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPLES, seed: int = 0,
                       threads: int = 1, progress: Optional[Callable[[float], None]] = None,
                       cancel: Optional[Callable[[], bool]] = None) -> tuple[np.ndarray, dict]:
-    """Direct irradiance E (N, 3) W/m² at every texel, and counters for report.json.
+    """Direct irradiance E (N, 3) W/m² at every texel, and counters for report.json. Each chunk
+    sums its texels' rays in float64 and stores them as float32: the value is only stored until
+    the estimate is added to it, and float32 holds it to the precision of the lightmap images.
 
     `caster` is the `photons.RayCaster` of the scene's triangles (shared with the photon tracer).
     Deterministic for a seed whatever the thread count: every texel's numbers come from its own
@@ -379,7 +383,7 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     t0 = time.perf_counter()
     lights = direct_lights(scene, int(samples))
     n = len(texels)
-    out = np.zeros((n, 3))
+    out = np.zeros((n, 3), np.float32)
     if n == 0 or not lights:
         return out, {"lights": len(lights), "rays": 0, "seconds": 0.0}
     pos = np.ascontiguousarray(texels.position, np.float64)
@@ -407,6 +411,7 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
         t = np.empty(most, np.float32)
         w = np.empty((most, 3))
         owner = np.empty(most, np.int64)
+        acc = np.zeros((b - a, 3))
         for li, light in enumerate(lights):
             key = seed_key(seed * 7919 + 1000003 * (li + 1))
             mesh = light.kind == MESH
@@ -420,10 +425,11 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
             if k == 0:
                 continue
             if srf.cutout:
-                _gather_weighted(k, transmittance(caster, srf, o[:k], d[:k], t[:k], eps), w, owner, out)
+                _gather_weighted(k, transmittance(caster, srf, o[:k], d[:k], t[:k], eps), w, owner, a, acc)
             else:
-                _gather(k, caster.occluded(o[:k], d[:k], t[:k]), w, owner, out)
+                _gather(k, caster.occluded(o[:k], d[:k], t[:k]), w, owner, a, acc)
             rays[index] += k
+        out[a:b] = acc
         with lock:
             done[0] += 1
             fraction = done[0] / len(chunks)

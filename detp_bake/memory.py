@@ -1,9 +1,10 @@
 """How much memory a bake will need, said before any long work, and what it really used.
 
 The peak is the sum of what lives at once: the texels (their records, the lightmap images before
-and after denoising, the direct light, the disc clearance), the estimator's per-texel state, a
-few photon batches (the one being filled, the one being estimated, a spare: photons.py), each
-thread's stream log, and for the photon map every stored hit. Batches are bounded in segments, not
+and after denoising, the direct light), the estimator's per-texel state, the denoiser's scratch
+and images for the largest lightmap (beyond the estimator state let go before it), a few photon
+batches (the one being filled, the one being estimated, a spare: photons.py), each thread's
+stream log, and for the photon map every stored hit. Batches are bounded in segments, not
 photons (`batch_photons`): in a closed white room with a thousand bounces a photon makes a
 thousand segments, and a batch of 100,000 photons would need gigabytes.
 """
@@ -22,8 +23,20 @@ SEGMENT_BYTES = 40  # origin, direction, length, flux (float32)
 HIT_BYTES = 52  # position, direction, flux, normal (float32), triangle
 STREAM_RAY_BYTES = 73  # a stream's log row: ray, flux, random state, Embree's answer, flags
 BATCH_SETS = 3  # record sets alive at once (photons._ArrayPool.KEEP)
-TEXEL_BYTES = 69 + 4 * 24 + 8  # TexelSet row, four (N, 3) float64 arrays in flight, clearance
+# Per texel (charged per pixel: an upper bound) whatever the estimator: the TexelSet row (float64
+# position and normal, int32 triangle and pixel, float32 area, a flag: 61) and the direct light and
+# E/π (float32 RGB, 24). What an estimator adds (its discs, index and sums, the discs' clearance,
+# the sums in flight, the noise sums, what its build leaves behind) is its `bytes_per_texel`.
+# Measured with benchmarks/memory.py (2048², a 5 % gutter): a disc_index bake needed about 500
+# bytes a texel before issue 10's cuts, about 300 after; the figures here are 1.1 times the
+# measured peaks, so the estimate stays above them when every pixel is a texel.
+TEXEL_BYTES = 61 + 2 * 12
 PIXEL_BYTES = 3 * 12 + 2  # raw, denoised and dilated float32 RGB, two masks
+# Denoising, one lightmap at a time: OIDN's scratch, bounded by denoise.MAX_MEMORY_MB (about 560
+# bytes a pixel below that), and the float32 images the denoiser works on beside it.
+OIDN_BYTES_PER_PIXEL = 560
+OIDN_MOST = 350_000_000
+DENOISE_PIXEL_BYTES = 6 * 12 + 4
 MAX_BATCH_SEGMENTS = 4_000_000  # segments one batch may hold (160 MB of records per set)
 MIN_BATCH = 1000
 
@@ -57,10 +70,11 @@ class Estimate:
 
 
 def estimate(pixels: int, estimator_bytes: dict, batch: int, per_photon_all: float, per_photon_kept: float,
-             threads: int, stored_hits: int = 0, geometry_bytes: int = 0) -> Estimate:
+             threads: int, stored_hits: int = 0, geometry_bytes: int = 0, denoised_pixels: int = 0) -> Estimate:
     """pixels: the lightmaps' pixels (an upper bound on texels); estimator_bytes: {name: bytes per
     texel}; batch: photons per batch; per_photon_all / per_photon_kept: segments a photon makes /
-    hands to the estimator; stored_hits: hits the photon map keeps."""
+    hands to the estimator; stored_hits: hits the photon map keeps; denoised_pixels: the largest
+    lightmap's pixels when lightmaps are denoised (one at a time), else 0."""
     from .photons import PhotonTracer
     parts = {
         "texels": pixels * TEXEL_BYTES,
@@ -72,9 +86,15 @@ def estimate(pixels: int, estimator_bytes: dict, batch: int, per_photon_all: flo
         "geometry": geometry_bytes,
     }
     for name, per_texel in estimator_bytes.items():
-        parts[f"estimator {name}"] = int(pixels * per_texel)
+        parts[f"estimator {name} texels"] = int(pixels * per_texel)  # its state per texel
     if stored_hits:
         parts["photon map hits"] = stored_hits * HIT_BYTES
+    if denoised_pixels:
+        # Each estimator is let go before its lightmaps are denoised (bake.py): the denoiser needs
+        # only what is more than the smallest estimator's state, which it takes over.
+        denoiser = min(denoised_pixels * OIDN_BYTES_PER_PIXEL, OIDN_MOST) + denoised_pixels * DENOISE_PIXEL_BYTES
+        freed = min((pixels * b for b in estimator_bytes.values()), default=0)
+        parts["denoiser"] = int(max(0, denoiser - freed))
     return Estimate(pixels, parts)
 
 
@@ -101,7 +121,16 @@ def geometry_budget(memory_budget_mb: int = 0) -> int:
 
 
 def peak_bytes() -> int:
-    """This process's peak resident memory so far (0 where the system cannot say)."""
+    """This process's peak resident memory so far (0 where the system cannot say). Linux's
+    VmHWM first: getrusage's ru_maxrss carries over from the parent through fork and exec, so a
+    bake started by a large process (a test run) would report that process's peak."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
     if resource is None:
         return 0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss

@@ -46,11 +46,12 @@ class BatchNoise:
         spread = np.maximum(self.sum_wx2 - self.weight * mean * mean, 0.0)
         return spread / ((self.groups - 1) * self.weight)
 
-    def relative(self, lightmaps, total: np.ndarray) -> dict:
-        """{object name: relative noise} of each lightmap; `total` (N, 3) is the full estimate
-        (direct + indirect) the noise is relative to."""
+    def relative(self, lightmaps, total: np.ndarray, scale: float = 1.0) -> dict:
+        """{object name: relative noise} of each lightmap; `total` (N, 3) times `scale` is the full
+        estimate (direct + indirect) the noise is relative to (scale: no scaled copy of it)."""
         var = self.variance()
-        lum = np.asarray(total, np.float64).mean(axis=1)
+        lum = np.mean(total, axis=1, dtype=np.float64)
+        lum *= scale
         out = {}
         for lm in lightmaps:
             sl = lm.texels

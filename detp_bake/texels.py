@@ -45,11 +45,13 @@ class Lightmap:
 @dataclass
 class TexelSet:
     """All covered texels of all baked objects, concatenated object by object."""
+    # Positions and normals stay float64: discs far from the origin and the lattice patches'
+    # 1e-9 normal tolerance (estimators/patches.py) need it. The rest is as small as it can be.
     position: np.ndarray  # (N, 3) float64, on the surface
     normal: np.ndarray  # (N, 3) float64, unit shading normal
     triangle: np.ndarray  # (N,) int32
-    pixel: np.ndarray  # (N,) int64, j * W + i within its lightmap
-    area: np.ndarray  # (N,) world area of surface inside the texel's square (sums to the total)
+    pixel: np.ndarray  # (N,) int32, j * W + i within its lightmap (W, H ≤ 16384)
+    area: np.ndarray  # (N,) float32, world area of surface inside the texel's square (sums to the total)
     centre_inside: np.ndarray  # (N,) bool: the texel centre lies on a UV triangle (Cycles bakes only these)
     lightmaps: list[Lightmap]
 
@@ -191,6 +193,31 @@ def _rasterise(uv, world_area, width, height, best_tri, best_d2, bary, cover, in
     return total, within
 
 
+@numba.njit(cache=True, parallel=True)
+def _surface(pixel, best_tri, bary, positions, normals, first, position, normal):
+    """Each covered texel's surface point and unit shading normal (the face normal where the
+    shading normals cancel out), written straight into the TexelSet's rows: no (N, 3, 3) gathers."""
+    for q in numba.prange(pixel.shape[0]):
+        k = pixel[q]
+        t = best_tri[k] + first
+        w0, w1, w2 = bary[k, 0], bary[k, 1], bary[k, 2]
+        for c in range(3):
+            position[q, c] = (w0 * np.float64(positions[t, 0, c]) + w1 * np.float64(positions[t, 1, c])
+                              + w2 * np.float64(positions[t, 2, c]))
+        nx = w0 * np.float64(normals[t, 0, 0]) + w1 * np.float64(normals[t, 1, 0]) + w2 * np.float64(normals[t, 2, 0])
+        ny = w0 * np.float64(normals[t, 0, 1]) + w1 * np.float64(normals[t, 1, 1]) + w2 * np.float64(normals[t, 2, 1])
+        nz = w0 * np.float64(normals[t, 0, 2]) + w1 * np.float64(normals[t, 1, 2]) + w2 * np.float64(normals[t, 2, 2])
+        if np.sqrt(nx * nx + ny * ny + nz * nz) < 1e-8:
+            # In the scene's own precision, as the face normal always was.
+            ax, ay, az = positions[t, 1, 0] - positions[t, 0, 0], positions[t, 1, 1] - positions[t, 0, 1], \
+                positions[t, 1, 2] - positions[t, 0, 2]
+            bx, by, bz = positions[t, 2, 0] - positions[t, 0, 0], positions[t, 2, 1] - positions[t, 0, 1], \
+                positions[t, 2, 2] - positions[t, 0, 2]
+            nx, ny, nz = np.float64(ay * bz - az * by), np.float64(az * bx - ax * bz), np.float64(ax * by - ay * bx)
+        length = max(np.sqrt(nx * nx + ny * ny + nz * nz), 1e-30)
+        normal[q, 0], normal[q, 1], normal[q, 2] = nx / length, ny / length, nz / length
+
+
 def _areas(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """Each triangle's world area and lightmap UV area."""
     world_area = 0.5 * np.linalg.norm(np.cross(scene.positions[:, 1] - scene.positions[:, 0],
@@ -236,32 +263,30 @@ def rasterise(scene: Scene) -> TexelSet:
         inside = np.zeros(res * res, np.int32)
         total, within = _rasterise(np.ascontiguousarray(uv[sl]), world_area[sl], res, res, best_tri, best_d2,
                                    bary, cover, inside)
-        pixel = np.flatnonzero(best_tri >= 0)
+        pixel = np.flatnonzero(best_tri >= 0).astype(np.int32)
         if pixel.size == 0:
             raise BakeError(f"object '{obj.name}': its lightmap UVs cover no texel at {res}x{res} "
                             "(are the UVs all zero or outside 0..1?)")
-        tri = best_tri[pixel] + obj.first_triangle
-        w = bary[pixel]
-        pos = np.einsum("nk,nkc->nc", w, scene.positions[tri].astype(np.float64))
-        nrm = np.einsum("nk,nkc->nc", w, scene.normals[tri].astype(np.float64))
-        length = np.linalg.norm(nrm, axis=1)
-        # Degenerate shading normals fall back to the face normal.
-        face = np.cross(scene.positions[tri, 1] - scene.positions[tri, 0],
-                        scene.positions[tri, 2] - scene.positions[tri, 0]).astype(np.float64)
-        bad = length < 1e-8
-        nrm[bad] = face[bad]
-        nrm /= np.maximum(np.linalg.norm(nrm, axis=1), 1e-30)[:, None]
+        pos = np.empty((len(pixel), 3))
+        nrm = np.empty((len(pixel), 3))
+        _surface(pixel, best_tri, bary, scene.positions, scene.normals, obj.first_triangle, pos, nrm)
+        tri = best_tri[pixel] + np.int32(obj.first_triangle)
+        del bary
         texel_size = _texel_size(world_area, uv_area, sl, res)
         held = int(np.count_nonzero(inside))
         overlap = float(np.count_nonzero(inside > 1)) / held if held else 0.0
         outside = max(0.0, 1.0 - within / total) if total > 0 else 0.0
         lightmaps.append(Lightmap(obj.name, index, res, res, offset, len(pixel), texel_size, overlap, outside))
-        parts.append((pos, nrm, tri.astype(np.int32), pixel.astype(np.int64), cover[pixel],
-                      best_d2[pixel] <= 1e-9))
+        parts.append([pos, nrm, tri, pixel, cover[pixel].astype(np.float32), best_d2[pixel] <= 1e-9])
         offset += len(pixel)
     if not parts:
         raise BakeError("no object to bake")
-    cat = [np.concatenate(x) for x in zip(*parts)]
+    # One field at a time, each object's part let go once copied: a copy of one field at most.
+    cat = []
+    for f in range(len(parts[0])):
+        cat.append(parts[0][f] if len(parts) == 1 else np.concatenate([p[f] for p in parts]))
+        for p in parts:
+            p[f] = None
     return TexelSet(*cat, lightmaps=lightmaps)
 
 
@@ -288,30 +313,46 @@ def to_image(values: np.ndarray, lm: Lightmap, pixel: np.ndarray) -> tuple[np.nd
     return img.reshape(lm.height, lm.width, c), mask.reshape(lm.height, lm.width)
 
 
+@numba.njit(cache=True)
+def _dilate(img, filled, margin):
+    """In place: `margin` rings, each empty texel next to filled ones taking their mean (float32
+    sums in neighbour order, as numpy's shifted sums gave); a ring reads only the texels filled
+    before it, so one image and two masks are all it needs."""
+    h, w, channels = img.shape
+    grown = filled.copy()
+    acc = np.zeros(channels, np.float32)
+    for _ in range(margin):
+        changed = False
+        for y in range(h):
+            for x in range(w):
+                if filled[y, x]:
+                    continue
+                acc[:] = 0.0
+                cnt = np.float32(0.0)
+                for dy in range(-1, 2):
+                    for dx in range(-1, 2):
+                        yy, xx = y + dy, x + dx
+                        if (dy == 0 and dx == 0) or yy < 0 or yy >= h or xx < 0 or xx >= w or not filled[yy, xx]:
+                            continue
+                        for c in range(channels):
+                            acc[c] += img[yy, xx, c]
+                        cnt += np.float32(1.0)
+                if cnt > 0:
+                    for c in range(channels):
+                        img[y, x, c] = acc[c] / cnt
+                    grown[y, x] = True
+                    changed = True
+        if not changed:
+            break
+        filled[:] = grown
+
+
 def dilate(image: np.ndarray, mask: np.ndarray, margin: int) -> np.ndarray:
     """Grow covered texels outwards by `margin` pixels: each empty texel next to covered ones
     takes their mean, ring by ring, as Blender's bake margin (extend) does."""
     img = image.astype(np.float32, copy=True)
-    filled = mask.copy()
-    h, w = filled.shape
-    for _ in range(int(margin)):
-        if filled.all():
-            break
-        acc = np.zeros_like(img)
-        cnt = np.zeros((h, w), np.float32)
-        pi = np.pad(img * filled[..., None], ((1, 1), (1, 1), (0, 0)))
-        pf = np.pad(filled.astype(np.float32), 1)
-        for dy in (-1, 0, 1):
-            for dx in (-1, 0, 1):
-                if dy == 0 and dx == 0:
-                    continue
-                acc += pi[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
-                cnt += pf[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
-        grow = (~filled) & (cnt > 0)
-        if not grow.any():
-            break
-        img[grow] = acc[grow] / cnt[grow][:, None]
-        filled = filled | grow
+    if img.shape[0] and img.shape[1] and not mask.all():
+        _dilate(img, np.array(mask, np.bool_), int(margin))
     return img
 
 

@@ -1,5 +1,10 @@
 """Memory is known before work: a bake that cannot fit is refused with what to lower, batches are
 bounded in segments, and report.json says the estimate and the peak."""
+import json
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -7,6 +12,7 @@ from detp_bake import memory
 from detp_bake.bake import BakeSettings, compute
 from detp_bake.errors import BakeError
 from detp_bake.scene import PointLight, SunLight
+from conftest import ROOT
 from synthetic import grid, make_scene, uv_sphere
 
 
@@ -38,3 +44,26 @@ def test_a_thousand_bounces_in_a_white_room_bound_the_batch_by_segments():
     assert r.memory["estimate_mb"] < 2000 and 0.5 < r.memory["estimate_mb"] / r.memory["peak_mb"] < 2.0
     report = r.report()
     assert report["memory"]["parts_mb"]["photon batches"] > 0
+
+
+def _bake_alone(resolution: int) -> dict:
+    """A disc_index bake in a fresh process (its peak resident memory is its own), as
+    benchmarks/memory.py makes them: a floor with a 5 % UV gutter, 5000 photons, no denoising."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "memory.py"), "--child", "disc_index",
+                           str(resolution), "5000", "0", "0.05"], capture_output=True, text=True, env=env, cwd=ROOT,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_the_estimate_per_texel_bounds_the_peak_a_bake_really_reaches():
+    """Bytes per texel, estimated and measured, from a 32² and a 768² bake (0.48 M texels): the
+    estimate must not be under the peak (a bake it lets through could run out of memory) nor
+    more than 1.5 times it (a bake that fits would be refused). About 310 bytes a texel now."""
+    small, large = _bake_alone(32), _bake_alone(768)
+    texels = large["texels"] - small["texels"]
+    measured = (large["peak"] - small["peak"]) / texels
+    estimated = (large["estimate_texels"] - small["estimate_texels"]) / texels
+    assert measured < estimated < 1.5 * measured, (estimated, measured, large["phases"])
+    assert measured < 400, measured  # before issue 10's cuts: about 500

@@ -44,6 +44,9 @@ def _splat_all(o, w, length, flux, cen, nrm, rad, slab, eps, kernel, acc, hits):
 @register
 class BruteForceDETP(Estimator):
     name = "detp"
+    # Discs' radius and slab, sums (24) and crossing counts; clearance, rise, noise sums, the sums
+    # in flight: measured, benchmarks/memory.py
+    bytes_per_texel = 120
     label = "DETP: Brute Force"
     description = "Every segment against every disc: slow, the reference the others match"
     streaming = True

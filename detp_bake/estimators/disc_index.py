@@ -187,6 +187,9 @@ def _splat(o, w, length, flux, eps, kernel, node, left, item_first, item_count, 
 @register
 class DiscIndex(Estimator):
     name = "disc_index"
+    # Discs (72), sums (24), tree order and patch sites; the discs' radius, clearance and rise (24),
+    # noise sums (16), the sums in flight, what the build leaves: measured, benchmarks/memory.py
+    bytes_per_texel = 200
     label = "DETP: Disc Index"
     description = "Tangent-disc density estimation with the discs indexed in a BVH (fastest)"
     streaming = True

@@ -109,7 +109,9 @@ class Hybrid(Estimator):
     discs = True
     compared = False  # one frame: disc_index's numbers at more cost
     group_segments = STREAM_SEGMENTS
-    bytes_per_texel = max(DiscIndex.bytes_per_texel, SphereCache.bytes_per_texel)
+    # The disc index's, and a copy of the static texels (texels.select) it is built over: measured,
+    # benchmarks/memory.py
+    bytes_per_texel = 290
 
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)

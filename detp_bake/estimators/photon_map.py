@@ -21,6 +21,7 @@ CHUNK = 8192  # texels per k-NN query, bounds the (chunk, k, 3) gather
 @register
 class PhotonMap(Estimator):
     name = "photon_map"
+    bytes_per_texel = 30  # its (N, 3) result (the hits are counted apart): benchmarks/memory.py
     label = "Photon Map"
     description = "Jensen's k-nearest-neighbour photon map: noisy, darkens edges"
     stores_hits = True

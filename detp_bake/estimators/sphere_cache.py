@@ -109,6 +109,9 @@ def _run(o, w, length, flux, eps, visit, edges, sc, sr, levels, radii,
 @register
 class SphereCache(Estimator):
     name = "sphere_cache"
+    # Discs' radius and slab, their spheres, levels and Morton order, sums (24); clearance and rise,
+    # noise sums, the sums in flight: measured, benchmarks/memory.py
+    bytes_per_texel = 160
     label = "DETP: Sphere Cache"
     description = "Tangent-disc density estimation through Lastra's sphere cache"
     streaming = True
