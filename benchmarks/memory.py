@@ -105,8 +105,9 @@ def _child(estimator: str, resolution: int, photons: int, denoise: bool, gutter:
         if p.phase in ("trace", "estimate") and phase[0] not in ("images", "denoise"):
             phase[0] = "trace+estimate"
 
+    # Every texel a site (sites.py): the most an estimator can hold, which the estimate assumes.
     settings = bake.BakeSettings(estimator=estimator, photons=photons, resolution=resolution, seed=1,
-                                 denoise=denoise)
+                                 denoise=denoise, indirect_spacing=1)
     watcher = threading.Thread(target=sample, daemon=True)
     watcher.start()
     t0 = time.perf_counter()

@@ -17,9 +17,7 @@ Methods (each bakes every mesh of the scene at the configuration's resolution):
 - ours, a ladder of photon counts: `<estimator>` is the default bake (direct light by shadow rays,
   the estimator on indirect light, OIDN RTLightmap); `<estimator>/no-denoise` the same bake's
   lightmaps before denoising, its seconds without the denoiser's (read off the same run);
-  `<estimator>/photons` the paper's mode (the estimator sees every segment, no denoising);
-  `<estimator>/every-texel` the default bake with the indirect estimate at every texel instead of
-  at every second one (`indirect_spacing=1`, sites.py), for the first estimator.
+  `<estimator>/photons` the paper's mode (the estimator sees every segment, no denoising).
 
 Error: relative RMSE over the texels whose centre lies on the surface (`BakeResult.centre_masks`,
 exactly the texels Cycles bakes), all objects and channels together, against the reference:
@@ -103,8 +101,7 @@ def label(method: str) -> str:
     name, _, variant = method.partition("/")
     return {"": f"`{name}`: shadow rays + estimator + OIDN (default)",
             "no-denoise": f"`{name}`: shadow rays + estimator, no denoise",
-            "photons": f"`{name}`: photons only (paper's mode), raw",
-            "every-texel": f"`{name}`: the default with the estimator at every texel"}[variant]
+            "photons": f"`{name}`: photons only (paper's mode), raw"}[variant]
 
 
 def timed(fn):
@@ -284,10 +281,7 @@ def bench_scene(label_, cfg, cache, log):
         # Done once raw Cycles is at the upper target and Cycles + OIDN below the lower one.
         return raw <= max(TARGETS) and out[RIVAL] <= STOP
 
-    def run_ours(name, photons, old_mode, every_texel=False):
-        if every_texel:  # the default bake with the estimator at every texel (sites.py), for comparison
-            r, wall, cpu = timed(lambda: compute(scene, ours_settings(cfg, name, photons=photons, indirect_spacing=1)))
-            return record(f"{name}/every-texel", {"photons": photons}, wall, cpu, r.images, r.seconds) <= STOP
+    def run_ours(name, photons, old_mode):
         if old_mode:
             r, wall, cpu = timed(lambda: compute(scene, ours_settings(cfg, name, photons=photons, direct="photons",
                                                                      denoise=False)))
@@ -305,8 +299,6 @@ def bench_scene(label_, cfg, cache, log):
     for k, name in enumerate(cfg["estimators"]):
         counts = cfg["photons"] if k == 0 else [p for p in cfg["photons"] if p in cfg["extra_photons"]]
         ladders.append((name, counts, lambda p, n=name: run_ours(n, p, False)))
-        if k == 0:
-            ladders.append((f"{name}/every-texel", counts, lambda p, n=name: run_ours(n, p, False, True)))
     for name in cfg["old_mode"]:
         counts = [p for p in cfg["photons"] if p <= cfg["old_mode_max"]]
         ladders.append((f"{name}/photons", counts, lambda p, n=name: run_ours(n, p, True)))

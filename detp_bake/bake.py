@@ -35,7 +35,6 @@ MAX_BOUNCES = 1024
 DIRECT_MODES = ("sampled", "photons")
 MAX_DIRECT_SAMPLES = 4096
 MAX_SPACING = 8
-AUTO_SPACING = 2
 
 
 @dataclass
@@ -61,9 +60,9 @@ class BakeSettings:
     time_limit: float = 0.0
     denoise: bool = True  # OIDN on every lightmap (chart-aware; denoise.py), when pyoidn is installed
     keep_raw: bool = False  # also write the lightmaps as they were before denoising (<name>.<estimator>.raw.exr)
-    # Texels between the sites where the estimator runs (sites.py): 0 is automatic (2 with sampled
-    # direct light, whose indirect part is smooth; 1, every texel, in the paper's mode and in frame
-    # ranges). The texels between sites blend their neighbouring sites.
+    # Texels between the sites where the estimator runs (sites.py), with sampled direct light: 0 is
+    # automatic (2 on lightmaps of 256² and more, 1 below); the paper's mode and frame ranges always
+    # estimate every texel. The texels between sites blend their neighbouring sites.
     indirect_spacing: int = 0
     estimator_settings: EstimatorSettings = field(default_factory=EstimatorSettings)
 
@@ -624,11 +623,11 @@ def layout_warnings(texels, estimator_settings, radius=None) -> list:
 
 
 def indirect_spacing(settings: BakeSettings, frame_state=None) -> int:
-    """The sites' spacing (sites.py): the setting, else 2 for sampled direct light; always 1 in the
-    paper's mode (the estimator then sees direct light, which is not smooth) and in frame ranges."""
+    """The sites' spacing (sites.py): the setting (0: chosen per lightmap by its size); always 1 in
+    the paper's mode (the estimator then sees direct light, which is not smooth) and in frame ranges."""
     if settings.direct != "sampled" or frame_state is not None:
         return 1
-    return int(settings.indirect_spacing) or AUTO_SPACING
+    return int(settings.indirect_spacing)
 
 
 def _snapshot_value(sites, current, direct_e, share) -> np.ndarray:

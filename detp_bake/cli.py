@@ -16,7 +16,7 @@ from pathlib import Path
 from dataclasses import replace
 from typing import Optional, Sequence
 
-from . import __version__, bake as bake_mod, estimators, images, interrupt, job as job_mod, output
+from . import __version__, bake as bake_mod, estimators, images, interrupt, job as job_mod, output, sites
 from .errors import BakeCancelled, BakeError
 from .estimators import KERNELS, EstimatorSettings, compare_defaults, names as estimator_names
 
@@ -59,7 +59,7 @@ def _bake_arguments(b, with_scene_path):
                    help="shadow rays per texel for each light with extent (default %(default)s)")
     b.add_argument("--indirect-spacing", type=int, default=_B.indirect_spacing, metavar="TEXELS",
                    help="with --direct sampled: estimate indirect light every this many texels and blend between "
-                        f"(0: automatic, {bake_mod.AUTO_SPACING}; 1: every texel)")
+                        f"(0: automatic, {sites.AUTO_SPACING} on lightmaps of {sites.AUTO_FROM}² and more; 1: every texel)")
     b.add_argument("--k", type=int, default=_E.k, help="photon map neighbours (default %(default)s)")
     b.add_argument("--radius-texels", type=float, default=_E.radius_texels,
                    help=f"DETP disc radius in texels (default {estimators.RADIUS_TEXELS_INDIRECT:g} with --direct "

@@ -71,9 +71,10 @@ class Estimate:
 
 def estimate(pixels: int, estimator_bytes: dict, batch: int, per_photon_all: float, per_photon_kept: float,
              threads: int, stored_hits: int = 0, geometry_bytes: int = 0, denoised_pixels: int = 0) -> Estimate:
-    """pixels: the lightmaps' pixels (an upper bound on texels); estimator_bytes: {name: bytes per
-    texel}; batch: photons per batch; per_photon_all / per_photon_kept: segments a photon makes /
-    hands to the estimator; stored_hits: hits the photon map keeps; denoised_pixels: the largest
+    """pixels: the lightmaps' pixels (an upper bound on texels, and on the estimators' sites,
+    sites.py, which leave them about half the texels of a large lightmap); estimator_bytes: {name:
+    bytes per texel}; batch: photons per batch; per_photon_all / per_photon_kept: segments a photon
+    makes / hands to the estimator; stored_hits: hits the photon map keeps; denoised_pixels: the largest
     lightmap's pixels when lightmaps are denoised (one at a time), else 0."""
     from .photons import PhotonTracer
     parts = {

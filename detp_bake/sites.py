@@ -29,6 +29,14 @@ from .texels import TexelSet
 
 NORMAL_COS = 0.9  # corners facing further away than about 25° are another surface
 REACH = 2.0  # a corner further than REACH × spacing × texel size is another surface
+# Spacing 0 (automatic): AUTO_SPACING on lightmaps of AUTO_FROM² pixels and more, every texel below.
+# The estimate's cost is set by the segments, not the discs (a segment's walk through the disc
+# index is about as long over half the discs), so sites save the passes per texel: disc clearance
+# and rise, which grow with the texels. L-shaped room, against a 16M-photon bake, 2 cores: at 256²
+# 20 % less time and 0.4-1.6 % lower RMSE; at 128² 5-10 % less time and 2 % higher RMSE; at 64²
+# the same time and 3 % higher RMSE.
+AUTO_SPACING = 2
+AUTO_FROM = 256
 
 
 @dataclass
@@ -37,7 +45,7 @@ class Sites:
     index: np.ndarray  # (M,) each site's texel in the full set
     source: np.ndarray  # (N, 4) int32: the sites each texel blends (0 where unused)
     weight: np.ndarray  # (N, 4) float64: their weights (sum 1 per texel)
-    spacing: int
+    spacing: int  # the largest of the lightmaps' spacings (1: every texel is a site)
 
     def expand(self, values: np.ndarray) -> np.ndarray:
         """(M, C) per site → (N, C) per texel."""
@@ -57,27 +65,35 @@ def every_texel(texels: TexelSet) -> Sites:
     return Sites(texels, np.arange(n), source, weight, 1)
 
 
+def spacings(texels: TexelSet, spacing: int) -> list:
+    """Each lightmap's spacing: `spacing`, or for 0 the automatic one by the lightmap's size."""
+    if spacing:
+        return [int(spacing)] * len(texels.lightmaps)
+    return [AUTO_SPACING if lm.width * lm.height >= AUTO_FROM ** 2 else 1 for lm in texels.lightmaps]
+
+
 def choose(texels: TexelSet, spacing: int) -> Sites:
-    """Sites every `spacing` texels (1: every texel is a site)."""
-    if spacing <= 1 or len(texels) == 0:
+    """Sites every `spacing` texels (1: every texel is a site; 0: by each lightmap's size)."""
+    each = spacings(texels, spacing)
+    if max(each, default=1) <= 1 or len(texels) == 0:
         return every_texel(texels)
     n = len(texels)
     is_site = np.zeros(n, np.bool_)
     corner = np.full((n, 4), -1, np.int64)  # corner texels, in the full set
     weight = np.zeros((n, 4))
-    for lm in texels.lightmaps:
+    for lm, s in zip(texels.lightmaps, each):
         sl = lm.texels
         grid = np.full(lm.width * lm.height, -1, np.int64)
         grid[texels.pixel[sl]] = np.arange(lm.offset, lm.offset + lm.count)
-        _corners(texels.pixel[sl], lm.width, lm.height, spacing, grid, texels.position, texels.normal,
-                 texels.centre_inside, REACH * spacing * lm.texel_size, NORMAL_COS, corner[sl], weight[sl], is_site[sl])
+        _corners(texels.pixel[sl], lm.width, lm.height, s, grid, texels.position, texels.normal,
+                 texels.centre_inside, REACH * s * lm.texel_size, NORMAL_COS, corner[sl], weight[sl], is_site[sl])
     index = np.flatnonzero(is_site)
     site_of = np.full(n, -1, np.int64)
     site_of[index] = np.arange(len(index))
     source = np.where(corner >= 0, site_of[np.maximum(corner, 0)], 0).astype(np.int32)
     weight[corner < 0] = 0.0
     weight /= weight.sum(axis=1, keepdims=True)
-    return Sites(_site_texels(texels, index, spacing), index, source, weight, spacing)
+    return Sites(_site_texels(texels, index, each), index, source, weight, max(each))
 
 
 @numba.njit(cache=True)
@@ -144,14 +160,14 @@ def _corners(pixel, width, height, s, grid, position, normal, centre_inside, rea
             weight[k, 0] = 1.0
 
 
-def _site_texels(texels: TexelSet, index: np.ndarray, s: int) -> TexelSet:
+def _site_texels(texels: TexelSet, index: np.ndarray, each: list) -> TexelSet:
     """The sites as a TexelSet: lattice sites at pixel (i/s, j/s) of a lightmap s times smaller,
     extra sites below it in column 0, one per row: no two sites share a pixel, and sites in one
     column never form a lattice patch (patches.py), whatever their places."""
     pixel = np.empty(len(index), np.int64)
     lightmaps = []
     offset = 0
-    for lm in texels.lightmaps:
+    for lm, s in zip(texels.lightmaps, each):
         mine = index[(index >= lm.offset) & (index < lm.offset + lm.count)]
         p = texels.pixel[mine]
         i, j = p % lm.width, p // lm.width

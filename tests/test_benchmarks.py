@@ -49,6 +49,18 @@ def test_paper_benchmark(tmp_path):
 
 
 @pytest.mark.blender  # its scenes are .blend files
+def test_sites_benchmark(tmp_path):
+    out = tmp_path / "sites.json"
+    text = _run("sites.py", "--scene", "cornell_box", "--resolutions", "32", "--photons", "5000", "--seeds", "1",
+                "--reference", "40000", "--json", str(out))
+    doc = json.loads(out.read_text())
+    assert [r["spacing"] for r in doc["rows"]] == [1, 2]
+    every, two = doc["rows"]
+    assert two["sites"] < every["sites"] == every["texels"] and 0 < every["rmse"] < 1 and 0 < two["rmse"] < 1
+    assert len(doc["summary"]) == 1 and "time" in text
+
+
+@pytest.mark.blender  # its scenes are .blend files
 def test_quality_benchmark(tmp_path):
     _run("quality.py", "--quick", "--scenes", "cornell_box", "--sweep-scene", "cornell_box",
          "--compositor-check", "--out", str(tmp_path))

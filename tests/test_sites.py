@@ -98,16 +98,31 @@ def _box_room(res):
     return make_scene(parts, [light], resolution=res, bounces=4)
 
 
-def test_default_spacing_keeps_the_mean_of_every_texel_estimate():
+def test_spacing_two_keeps_the_mean_of_every_texel_estimate():
     sc = _box_room(32)
     every = compute(sc, BakeSettings(photons=400_000, indirect_spacing=1, denoise=False))
-    auto = compute(sc, BakeSettings(photons=400_000, denoise=False))
-    assert every.direct["indirect_spacing"] == 1 and auto.direct["indirect_spacing"] == 2
-    assert auto.direct["indirect_sites"] < 0.5 * every.direct["indirect_sites"]
+    two = compute(sc, BakeSettings(photons=400_000, indirect_spacing=2, denoise=False))
+    assert every.direct["indirect_spacing"] == 1 and two.direct["indirect_spacing"] == 2
+    assert two.direct["indirect_sites"] < 0.6 * every.direct["indirect_sites"]
     for name in every.images:
         lm = next(m for m in every.texels.lightmaps if m.name == name)
-        a, b = every.value[lm.texels].mean(0), auto.value[lm.texels].mean(0)
+        a, b = every.value[lm.texels].mean(0), two.value[lm.texels].mean(0)
         assert np.allclose(b, a, rtol=0.01), name
+
+
+def test_automatic_spacing_goes_by_each_lightmaps_size():
+    sc = _box_room(32)
+    sc.objects[0].resolution = sites.AUTO_FROM  # the floor's lightmap is large, the others small
+    tx = texels.rasterise(sc)
+    assert sites.spacings(tx, 0) == [sites.AUTO_SPACING] + [1] * 5
+    assert sites.spacings(tx, 3) == [3] * 6
+    s = sites.choose(tx, 0)
+    floor = tx.lightmaps[0]
+    on_floor = s.index < floor.count
+    assert on_floor.sum() < 0.5 * floor.count  # sites on the floor only
+    assert (~on_floor).sum() == len(tx) - floor.count
+    assert compute(sc, BakeSettings(photons=2000, denoise=False)).direct["indirect_spacing"] == 2
+    assert compute(sc, BakeSettings(photons=2000, denoise=False, direct="photons")).direct["indirect_spacing"] == 1
 
 
 def test_spacing_is_validated():

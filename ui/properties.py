@@ -6,7 +6,7 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-from ..detp_bake import bake, estimators, images
+from ..detp_bake import bake, estimators, images, sites
 
 _B, _E = bake.BakeSettings, estimators.EstimatorSettings
 ESTIMATORS = [(n, estimators.get(n).label, estimators.get(n).description) for n in estimators.names()]
@@ -28,7 +28,8 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
                                             "sun disc, sky, emissive meshes); point lights need one")
     indirect_spacing: IntProperty(name="Indirect Spacing", default=_B.indirect_spacing, min=0, max=bake.MAX_SPACING,
                                   description="Estimate indirect light every this many texels and blend between "
-                                              f"them (0: automatic, {bake.AUTO_SPACING}; 1: every texel). Indirect "
+                                              f"them (0: automatic, {sites.AUTO_SPACING} on lightmaps of {sites.AUTO_FROM}² and "
+                                              "more; 1: every texel). Indirect "
                                               "light is smooth: fewer sites cost less for the same noise")
     target_noise: FloatProperty(name="Noise Target", default=_B.target_noise, min=0.0, max=100.0, soft_max=10.0,
                                 subtype="PERCENTAGE",
