@@ -71,7 +71,11 @@ test-5.2:
 		NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-5.2-$(CORE_HASH) $(VENV52)/bin/python -m pytest tests $(PYTEST_ARGS); \
 	fi
 
-test: test-core-smoke test-4.5 test-5.2
+# The two lines run at once, each line's output kept together: the suite is mostly one thread
+# (numba's cold compiles, Blender's file loads), so on 2 cores both lines take about the time of one.
+OUTPUT_SYNC := $(if $(filter output-sync,$(.FEATURES)),--output-sync=target,)
+test: test-core-smoke
+	$(MAKE) --no-print-directory -j2 $(OUTPUT_SYNC) test-4.5 test-5.2
 
 # Extension zips, one per platform of blender_manifest.toml, each with the wheels of both Blender
 # lines (cp311 for 4.5, cp313 for 5.2; numpy is Blender's own): dist/detp_bake-<version>-<platform>.zip.

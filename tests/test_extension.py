@@ -20,7 +20,8 @@ import extension_build as eb
 from conftest import CORNELL, ROOT
 
 PY = f"{sys.version_info.major}.{sys.version_info.minor}"
-WHEEL_CACHE = ROOT / ".cache" / "extension-wheels"
+# One folder per Python: the two Blender lines' suites may run at once (make test).
+WHEEL_CACHE = ROOT / ".cache" / "extension-wheels" / f"py{sys.version_info.major}{sys.version_info.minor}"
 HOST = {("linux", "x86_64"): "linux-x64", ("win32", "AMD64"): "windows-x64",
         ("darwin", "arm64"): "macos-arm64"}.get((sys.platform, platform.machine()))
 
