@@ -99,15 +99,23 @@ def estimate(pixels: int, estimator_bytes: dict, batch: int, per_photon_all: flo
     return Estimate(pixels, parts)
 
 
-def available_bytes() -> int:
-    """Memory the system could give now (MemAvailable), or 0 when it cannot say."""
+def _proc_kib(path: str, key: str):
+    """Bytes of a "Key: N kB" line of a Linux /proc file, or None where there is none."""
     try:
-        with open("/proc/meminfo") as f:
+        with open(path) as f:
             for line in f:
-                if line.startswith("MemAvailable:"):
+                if line.startswith(key + ":"):
                     return int(line.split()[1]) * 1024
     except OSError:
         pass
+    return None
+
+
+def available_bytes() -> int:
+    """Memory the system could give now (MemAvailable), or 0 when it cannot say."""
+    free = _proc_kib("/proc/meminfo", "MemAvailable")
+    if free is not None:
+        return free
     try:
         return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (ValueError, OSError, AttributeError):
@@ -125,13 +133,9 @@ def peak_bytes() -> int:
     """This process's peak resident memory so far (0 where the system cannot say). Linux's
     VmHWM first: getrusage's ru_maxrss carries over from the parent through fork and exec, so a
     bake started by a large process (a test run) would report that process's peak."""
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
+    peak = _proc_kib("/proc/self/status", "VmHWM")
+    if peak is not None:
+        return peak
     if resource is None:
         return 0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
