@@ -429,8 +429,7 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
         # answers what the rest of the loop asks (streaming, discs, stores_hits, fixed_noise).
         runs[name] = type(est)
         est = None
-        if sites.spacing > 1:
-            out.irradiance = sites.expand(out.irradiance)
+        out.irradiance = sites.expand(out.irradiance)
         value = _value(out, direct_e, share)
         spent[name] += time.perf_counter() - t1
         seconds = {"rasterise": rasterise_seconds, "direct": direct_info.get("seconds", 0.0),
@@ -631,9 +630,7 @@ def indirect_spacing(settings: BakeSettings, frame_state=None) -> int:
 
 
 def _snapshot_value(sites, current, direct_e, share) -> np.ndarray:
-    irradiance = current() / share
-    if sites.spacing > 1:
-        irradiance = sites.expand(irradiance)
+    irradiance = sites.expand(current() / share)
     return (irradiance if direct_e is None else irradiance + direct_e) / np.pi
 
 

@@ -48,12 +48,14 @@ class Sites:
     spacing: int  # the largest of the lightmaps' spacings (1: every texel is a site)
 
     def expand(self, values: np.ndarray) -> np.ndarray:
-        """(M, C) per site → (N, C) per texel."""
+        """(M, C) per site → (N, C) per texel (the same array when every texel is a site)."""
+        if self.spacing <= 1:
+            return values
         return _blend(np.ascontiguousarray(values, np.float64), self.source, self.weight)
 
     def of_sites(self, per_texel: np.ndarray) -> np.ndarray:
-        """(N, …) per texel → (M, …) the sites' own rows."""
-        return per_texel[self.index]
+        """(N, …) per texel → (M, …) the sites' own rows (no copy when every texel is a site)."""
+        return per_texel if self.spacing <= 1 else per_texel[self.index]
 
 
 def every_texel(texels: TexelSet) -> Sites:
