@@ -24,8 +24,8 @@ from . import __version__, denoise as denoise_mod, direct as direct_mod, estimat
 from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
-from .estimators.discs import SLAB, disc_radius
-from .estimators.rise import own_surface_rise
+from .estimators.discs import SLAB, capped_radius, disc_radius
+from .estimators.rise import own_surface_rise, piece_extent
 from .photons import PhotonBatch, PhotonTracer, RayCaster, TraceStats
 from .scene import Scene
 
@@ -343,15 +343,18 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
             raise BakeCancelled()
 
     expected_segments = int(tracer.photons * per_photon_kept)
-    clearance = rise = None
+    clearance = rise = extent = None
     t0 = time.perf_counter()
     if discs:
         report(Progress("prepare", 0.0, "Measuring disc clearance"))
+        # A disc no wider than the piece of surface it lies on (a leaf card): rise.piece_extent.
+        extent = piece_extent(at, scene)
+        radius = capped_radius(radius, extent)
         clearance = texels_mod.tangent_clearance(at, scene.positions, radius, 0.5 * SLAB * radius)
         rise = own_surface_rise(at, scene, radius)
     clearance_seconds = time.perf_counter() - t0
     context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
-                                 clearance=clearance, rise=rise, frames=frame_state)
+                                 clearance=clearance, rise=rise, extent=extent, frames=frame_state)
     runs, build = {}, {}
     for name in names:
         report(Progress("prepare", 0.5, f"Preparing {name}"))

@@ -2,7 +2,9 @@
 curved ones what their curvature needs, and another piece in front counts for nothing."""
 import numpy as np
 
-from detp_bake.estimators.rise import mesh_pieces, own_surface_rise
+from detp_bake.estimators import EstimatorSettings
+from detp_bake.estimators.discs import CLEARANCE_FLOOR, make_discs
+from detp_bake.estimators.rise import mesh_pieces, own_surface_rise, piece_extent
 from detp_bake.scene import PointLight
 from detp_bake.texels import rasterise
 from synthetic import grid, make_scene, uv_sphere
@@ -65,3 +67,35 @@ def test_a_leaf_smaller_than_its_disc_is_measured_from_its_vertices():
     flat_lm, folded_lm = texels.lightmaps
     assert np.allclose(rise[flat_lm.texels], 0.0, atol=1e-7)
     assert np.all(rise[folded_lm.texels] > 0.004)
+
+
+def test_piece_extent_is_the_equal_area_radius_of_each_welded_piece():
+    """One object holding a 0.1 m card and a 2 m plate: each texel gets sqrt(A/π) of its own piece."""
+    card, plate = grid(0.1, 0.1, 2, z=0.5), grid(2.0, 2.0, 4, z=0.0)
+    card, plate = (*card[:2], 0.4 * card[2]), (*plate[:2], 0.5 + 0.5 * plate[2])  # side by side in UV
+    both = tuple(np.concatenate([a, b]) for a, b in zip(card, plate))
+    sc = make_scene([("Both", both, 0.5, True)], LAMP, resolution=32)
+    texels = rasterise(sc)
+    extent = piece_extent(texels, sc)
+    on_card = texels.position[:, 2] > 0.25
+    assert on_card.any() and (~on_card).any()
+    assert np.allclose(extent[on_card], np.sqrt(0.01 / np.pi), rtol=1e-5)
+    assert np.allclose(extent[~on_card], np.sqrt(4.0 / np.pi), rtol=1e-5)
+
+
+def test_a_disc_is_no_wider_than_its_piece_and_clearance_cuts_what_is_left():
+    """The cap (the leaf's size) comes first; tangent clearance then cuts the capped disc, down to
+    a quarter of the *capped* radius. A floor taken from the setting's radius let the crowns' discs
+    reach past the leaves beside them (+1.5 % on the patio's crowns, benchmarks/objects.py)."""
+    sc = make_scene([("Card", grid(0.1, 0.1, 2), 0.5, True)], LAMP, resolution=8)
+    texels = rasterise(sc)
+    n = len(texels)
+    settings = EstimatorSettings(radius=0.1)
+    extent = np.full(n, 0.04)
+    free = make_discs(texels, settings, 1.0, clearance=np.full(n, 1.0), extent=extent)
+    assert np.allclose(free.radius, 0.04)
+    cut = make_discs(texels, settings, 1.0, clearance=np.full(n, 0.001), extent=extent)
+    assert np.allclose(cut.radius, CLEARANCE_FLOOR * 0.04)
+    tiny = make_discs(texels, settings, 1.0, extent=np.full(n, 1e-4))  # no disc under a quarter of the setting
+    assert np.allclose(tiny.radius, CLEARANCE_FLOOR * 0.1)
+    assert np.allclose(make_discs(texels, settings, 1.0).radius, 0.1)  # no extent: the setting

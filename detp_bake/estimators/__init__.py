@@ -49,6 +49,7 @@ class Context:
     expected_segments: int = 0  # an estimate made before tracing, for work limits
     clearance: Optional[np.ndarray] = None  # per texel, free distance in its tangent plane (DETP discs)
     rise: Optional[np.ndarray] = None  # per texel, its own surface's height in front of its disc (rise.py)
+    extent: Optional[np.ndarray] = None  # per texel, the size of its own piece of surface (rise.piece_extent)
     frames: Optional["FrameState"] = None  # set when baking a frame range (frames.py)
 
 

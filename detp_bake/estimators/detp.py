@@ -59,7 +59,8 @@ class BruteForceDETP(Estimator):
         if work > WORK_LIMIT:
             raise BakeError(f"estimator 'detp' (brute force) would test about {work:.2g} segment–disc pairs "
                             f"(limit {WORK_LIMIT:.0e}): use sphere_cache or disc_index, or fewer photons/texels")
-        self.discs = make_discs(texels, settings, self.context.scene_radius, self.context.clearance, self.context.rise)
+        self.discs = make_discs(texels, settings, self.context.scene_radius, self.context.clearance, self.context.rise,
+                                self.context.extent)
         self.acc = np.zeros((len(texels), 3))
         self.crossings = np.zeros(len(texels), np.int64)
         self.segments = 0

@@ -198,7 +198,8 @@ class DiscIndex(Estimator):
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)
         t0 = time.perf_counter()
-        d = make_discs(texels, settings, self.context.scene_radius, self.context.clearance, self.context.rise)
+        d = make_discs(texels, settings, self.context.scene_radius, self.context.clearance, self.context.rise,
+                       self.context.extent)
         self.eps, self.kernel = d.eps, d.kernel
         patch_of = site_of = geo = None
         t1 = time.perf_counter()

@@ -27,6 +27,7 @@ from ..texels import TexelSet
 SLAB = 0.25  # δ as a fraction of r, at most
 FLAT_SLAB = 0.02  # δ over the texel's own surface rise, as a fraction of r
 RISE_STEP = 0.01  # the rise is rounded up to steps of this fraction of r
+CLEARANCE_FLOOR = 0.25  # clearance cuts a disc to no less than this fraction of its radius
 KERNELS = {"constant": 0, "epanechnikov": 1}
 
 
@@ -66,16 +67,25 @@ def disc_radius(texels: TexelSet, settings) -> np.ndarray:
     return texels.per_texel([lm.texel_size for lm in texels.lightmaps]) * float(wide)
 
 
-def make_discs(texels: TexelSet, settings, scene_radius: float, clearance=None, rise=None) -> Discs:
+def capped_radius(radius: np.ndarray, extent=None) -> np.ndarray:
+    """The disc radius no wider than the texel's own piece of surface (`extent`, rise.piece_extent),
+    and no narrower than CLEARANCE_FLOOR of the setting's radius."""
+    if extent is None:
+        return radius
+    return np.minimum(radius, np.maximum(extent, CLEARANCE_FLOOR * radius))
+
+
+def make_discs(texels: TexelSet, settings, scene_radius: float, clearance=None, rise=None, extent=None) -> Discs:
     """`clearance`: per texel, how far the surface runs in its tangent plane before other
     geometry stands in the way (texels.tangent_clearance); discs are cut to it, so a floor's disc
     does not reach past the wall beside it into light on the wall's other side. `rise`: per texel,
-    how far its own surface rises in front of the disc (rise.py); the slab is cut to it."""
+    how far its own surface rises in front of the disc (rise.py); the slab is cut to it. `extent`:
+    per texel, the size of its own piece of surface (rise.piece_extent); no disc is wider."""
     if settings.kernel not in KERNELS:
         raise BakeError(f"setting 'kernel' = {settings.kernel!r}: choose {', '.join(KERNELS)}")
-    radius = disc_radius(texels, settings)
+    radius = capped_radius(disc_radius(texels, settings), extent)
     if clearance is not None:
-        radius = np.minimum(radius, np.maximum(clearance, 0.25 * radius))
+        radius = np.minimum(radius, np.maximum(clearance, CLEARANCE_FLOOR * radius))
     if not np.all(radius > 0):
         raise BakeError("disc radius is zero: a lightmap has no texel area (check its UVs)")
     eps = 1e-6 * max(scene_radius, 1e-3)

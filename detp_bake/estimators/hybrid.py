@@ -123,16 +123,16 @@ class Hybrid(Estimator):
         static = np.zeros(len(texels), bool)
         for lm in texels.lightmaps:
             static[lm.texels] = lm.name not in moving
-        clearance, rise = self.context.clearance, self.context.rise
+        clearance, rise, extent = self.context.clearance, self.context.rise, self.context.extent
         scene_radius, expected = self.context.scene_radius, self.context.expected_segments
 
         def context(mask):  # the bake's context for the texels of `mask`
             return Context(scene_radius, expected, None if clearance is None else clearance[mask],
-                           None if rise is None else rise[mask])
+                           None if rise is None else rise[mask], None if extent is None else extent[mask])
 
         static_texels = select(texels, static)
         sub = context(static)
-        discs = make_discs(static_texels, settings, scene_radius, sub.clearance, sub.rise)
+        discs = make_discs(static_texels, settings, scene_radius, sub.clearance, sub.rise, sub.extent)
         kept = state.keep.get(self.name) if state is not None else None
         self.reused = kept is not None and kept.serves(static, texels.pixel[static], discs, settings)
         if self.reused:
@@ -158,7 +158,7 @@ class Hybrid(Estimator):
             cached_texels = select(texels, cached)
             sub = context(cached)
             self.cache = MOVING[settings.hybrid_moving](cached_texels, settings, progress, sub)
-            cached_discs = make_discs(cached_texels, settings, scene_radius, sub.clearance, sub.rise)
+            cached_discs = make_discs(cached_texels, settings, scene_radius, sub.clearance, sub.rise, sub.extent)
             self.box_lo, self.box_hi = _boxes(cached_discs)
             self.eps = cached_discs.eps
         self.seconds_build = time.perf_counter() - t0

@@ -109,6 +109,27 @@ def _rise(position, normal, radius, piece, cell):
     return out
 
 
+def piece_extent(texels: TexelSet, scene) -> np.ndarray:
+    """Per texel: the radius of a disc with the area of its own welded piece of mesh, sqrt(A/π).
+
+    A disc wider than the surface it lies on reads the light in the air around that surface. On a
+    leaf card in a crown, where light falls steeply from the crown's shell inwards, that read the
+    crowns' indirect light 2–3 % high with 3-texel discs (benchmarks/objects.py); discs no wider
+    than their leaf take it under 1 %. Large pieces (walls, floors) are far wider than any disc."""
+    out = np.full(len(texels), np.inf)
+    for lm in texels.lightmaps:
+        sl = lm.texels
+        obj = scene.objects[lm.object_index]
+        tris = scene.positions[obj.triangles]
+        if len(tris) == 0:
+            continue
+        tri_piece = _welded(tris)[0]
+        area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+        piece_area = np.bincount(tri_piece, weights=area.astype(np.float64))
+        out[sl] = np.sqrt(piece_area[tri_piece[texels.triangle[sl] - obj.first_triangle]] / np.pi)
+    return out
+
+
 def own_surface_rise(texels: TexelSet, scene, radius: np.ndarray) -> np.ndarray:
     """Per texel: how high its own surface rises in front of its tangent plane at `radius`: from
     the texels of its own lightmap on the same piece of its object's mesh, between r/2 and 2r

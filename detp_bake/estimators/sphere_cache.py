@@ -121,7 +121,8 @@ class SphereCache(Estimator):
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)
         t0 = time.perf_counter()
-        self.discs = make_discs(texels, settings, self.context.scene_radius, self.context.clearance, self.context.rise)
+        self.discs = make_discs(texels, settings, self.context.scene_radius, self.context.clearance, self.context.rise,
+                                self.context.extent)
         self.sphere_centre, self.sphere_radius = self.discs.bounding_spheres()
         q = float(settings.q)
         r0 = 2.0 * self.context.scene_radius  # contains the scene wherever its centre is
