@@ -19,7 +19,8 @@ Units as everywhere in the core: irradiance E in W/m² (the bake stores E/π, Cy
 - emissive triangles: both faces, radiance L; a triangle is picked in proportion to its power;
 - world colour L: cosine-weighted directions, π·L when nothing is in the way.
 
-Every light is sampled at every texel (no per-texel light selection yet). Texel chunks run on
+Every light is sampled at every texel (no per-texel light selection yet), each ray from its own
+point of the texel's square (texel_area.py), as Cycles averages a texel over its square. Texel chunks run on
 worker threads: the ray generation and the sums are compiled (`nogil`), the occlusion test is one
 embreex `run(query='OCCLUDED')` per chunk and light, which releases the GIL.
 """
@@ -44,11 +45,13 @@ from .environment import environment_rays
 from .scattering import MAX_PASSES
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
 from .textures import opacity_at, surfaces
+from .texel_area import area_point, texel_squares
 
 POINT, SUN, AREA, MESH, WORLD, WORLD_MAP = 0, 1, 2, 3, 4, 5
 FAR = 1e37
 CHUNK = 2048  # texels per work item
 DEFAULT_SAMPLES = 16
+DELTA_SAMPLES = 4  # rays per texel for a point light or a sun without extent: spread over its square
 
 
 @dataclass
@@ -75,12 +78,14 @@ def _row(*parts) -> np.ndarray:
     return row
 
 
-def direct_lights(scene: Scene, samples: int) -> list[DirectLight]:
+def direct_lights(scene: Scene, samples: int, spread: bool = True) -> list[DirectLight]:
     """The scene's emitters in the kernel's form. Param rows (float64[32]):
     POINT: position(3) intensity RGB(3) radius axis(3) cos_half smooth is_spot;
     SUN: towards-sun direction(3) irradiance(3) cos_max;
     AREA: matrix rows 0-2 (12) emitting normal(3) size_x size_y is_disc P/π RGB(3);
-    WORLD: radiance(3)."""
+    WORLD: radiance(3). A point light or a sharp sun takes one ray per texel, or DELTA_SAMPLES
+    spread over the texel's square (`spread`)."""
+    delta = min(samples, DELTA_SAMPLES) if spread else 1
     out = []
     for light in scene.lights:
         if isinstance(light, (PointLight, SpotLight)):
@@ -95,13 +100,13 @@ def direct_lights(scene: Scene, samples: int) -> list[DirectLight]:
             else:
                 spot = (np.zeros(3), -2.0, 0.0, 0.0)
             out.append(DirectLight(light.name, POINT, _row(light.position, intensity, radius, *spot),
-                                   samples if radius > 0.0 else 1))
+                                   samples if radius > 0.0 else delta))
         elif isinstance(light, SunLight):
             d = np.asarray(light.direction, np.float64)
             d = -d / np.linalg.norm(d)
             cos_max = float(np.cos(0.5 * light.angle)) if light.angle > 0.0 else 1.0
             out.append(DirectLight(light.name, SUN, _row(d, light.irradiance, cos_max),
-                                   samples if cos_max < 1.0 else 1))
+                                   samples if cos_max < 1.0 else delta))
         elif isinstance(light, AreaLight):
             m = np.asarray(light.matrix, np.float64)
             xy = np.cross(m[:3, 0], m[:3, 1])
@@ -171,20 +176,23 @@ def _towards(sx, sy, sz, nx, ny, nz):
 
 @jit
 def _shadow_rays(kind, prm, samples, key, ids, a, b, pos, nrm, geo, eps,
-                 cdf, tpos, tnrm, trad, o, d, t, w, owner):
-    """Rays for texels a … b−1 and one light: origins `o` (offset along the geometric normal `geo`),
-    unit directions `d`, far limits `t`, and `w` the RGB irradiance each adds when unoccluded
-    (already divided by the sample count); `owner` the texel. Rays that cannot add anything
-    (light behind the surface, outside a spot cone) are left out. Returns the ray count."""
+                 cdf, tpos, tnrm, trad, spread, sq_tri, sq_cx, sq_cy, sq_w, sq_h, uvs, positions, o, d, t, w, owner):
+    """Rays for texels a … b−1 and one light: origins `o` (each at its own point of the texel's
+    square: texel_area.py; offset along the geometric normal `geo`), unit directions `d`, far
+    limits `t`, and `w` the RGB irradiance each adds when unoccluded (already divided by the sample
+    count); `owner` the texel. Rays that cannot add anything (light behind the surface, outside a
+    spot cone) are left out. Returns the ray count."""
     k = 0
     inv_s = 1.0 / samples
     for i in range(a, b):
-        px, py, pz = pos[i, 0], pos[i, 1], pos[i, 2]
         nx, ny, nz = nrm[i, 0], nrm[i, 1], nrm[i, 2]
         gx, gy, gz = geo[i, 0], geo[i, 1], geo[i, 2]
-        ox, oy, oz = px + eps * gx, py + eps * gy, pz + eps * gz
         state, r0, r1 = uniform2(photon_rng(key, ids[i]))
+        state, q0, q1 = uniform2(state)
         for j in range(samples):
+            px, py, pz = area_point(spread, i, j, samples, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h, uvs, positions,
+                                    pos)
+            ox, oy, oz = px + eps * gx, py + eps * gy, pz + eps * gz
             u0 = (j + 0.5) * inv_s + r0
             u0 -= math.floor(u0)
             u1 = _radical_inverse2(j) + r1
@@ -372,16 +380,17 @@ def texel_ids(texels) -> np.ndarray:
 
 def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPLES, seed: int = 0,
                       threads: int = 1, progress: Optional[Callable[[float], None]] = None,
-                      cancel: Optional[Callable[[], bool]] = None) -> tuple[np.ndarray, dict]:
+                      cancel: Optional[Callable[[], bool]] = None, spread: bool = True) -> tuple[np.ndarray, dict]:
     """Direct irradiance E (N, 3) W/m² at every texel, and counters for report.json. Each chunk
     sums its texels' rays in float64 and stores them as float32: the value is only stored until
     the estimate is added to it, and float32 holds it to the precision of the lightmap images.
 
     `caster` is the `photons.RayCaster` of the scene's triangles (shared with the photon tracer).
     Deterministic for a seed whatever the thread count: every texel's numbers come from its own
-    stream, and each texel is summed by one chunk."""
+    stream, and each texel is summed by one chunk. `spread`: rays start all over the texel's square
+    (texel_area.py, as Cycles bakes), or all at its position (its centre, for closed-form checks)."""
     t0 = time.perf_counter()
-    lights = direct_lights(scene, int(samples))
+    lights = direct_lights(scene, int(samples), spread)
     n = len(texels)
     out = np.zeros((n, 3), np.float32)
     if n == 0 or not lights:
@@ -390,6 +399,9 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     nrm = np.ascontiguousarray(texels.normal, np.float64)
     geo = geometric_normals(scene, texels.triangle, nrm)
     ids = texel_ids(texels)
+    squares = texel_squares(texels)
+    uvs = np.ascontiguousarray(scene.uvs, np.float32)
+    positions = np.ascontiguousarray(scene.positions, np.float32)
     centre, radius = scene.bounds()
     eps = max(1e-5 * radius, 1e-6)
     srf = surfaces(scene)
@@ -416,12 +428,14 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
             key = seed_key(seed * 7919 + 1000003 * (li + 1))
             mesh = light.kind == MESH
             if light.kind == WORLD_MAP:
-                k = environment_rays(*light.env, light.samples, key, ids, a, b, pos, nrm, geo, eps, o, d, t, w, owner)
+                k = environment_rays(*light.env, light.samples, key, ids, a, b, pos, nrm, geo, eps, spread, *squares, uvs,
+                                     positions, o, d, t, w, owner)
             else:
                 k = _shadow_rays(light.kind, light.params, light.samples, key, ids, a, b, pos, nrm, geo, eps,
                                  light.tri_cdf if mesh else empty_cdf, light.tri_pos if mesh else empty_tri,
                                  light.tri_normal if mesh else empty_vec,
-                                 light.tri_radiance if mesh else empty_vec, o, d, t, w, owner)
+                                 light.tri_radiance if mesh else empty_vec, spread, *squares, uvs, positions, o, d, t, w,
+                                 owner)
             if k == 0:
                 continue
             if srf.cutout:

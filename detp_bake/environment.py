@@ -18,6 +18,7 @@ import numpy as np
 from .footprint import sky_areas, sky_start
 from .lights import Emitter
 from .sampling import inline, jit, photon_rng, search_cdf, uniform2
+from .texel_area import area_point
 
 
 @dataclass
@@ -124,15 +125,17 @@ def environment_emitter(env: EnvironmentMap, centre: np.ndarray, radius: float, 
 
 
 @jit
-def environment_rays(marginal, cond, prob, rot, pixels, samples, key, ids, a, b, pos, nrm, geo, eps, o, d, t, w, owner):
-    """Shadow rays towards the map for texels a … b−1 (see direct._shadow_rays): each adds
-    L(ω)·cos θ / (p(ω)·samples) when nothing is in the way."""
+def environment_rays(marginal, cond, prob, rot, pixels, samples, key, ids, a, b, pos, nrm, geo, eps, spread,
+                     sq_tri, sq_cx, sq_cy, sq_w, sq_h, uvs, positions, o, d, t, w, owner):
+    """Shadow rays towards the map for texels a … b−1 (see direct._shadow_rays), each from its own
+    point of the texel's square: each adds L(ω)·cos θ / (p(ω)·samples) when nothing is in the way."""
     k = 0
     inv_s = 1.0 / samples
     for i in range(a, b):
         nx, ny, nz = nrm[i, 0], nrm[i, 1], nrm[i, 2]
         gx, gy, gz = geo[i, 0], geo[i, 1], geo[i, 2]
         state, r0, r1 = uniform2(photon_rng(key, ids[i]))
+        state, q0, q1 = uniform2(state)
         for j in range(samples):
             u0 = (j + 0.5) * inv_s + r0
             u0 -= math.floor(u0)
@@ -144,7 +147,9 @@ def environment_rays(marginal, cond, prob, rot, pixels, samples, key, ids, a, b,
             if cos_x <= 0.0 or x * gx + y * gy + z * gz <= 0.0 or pdf <= 0.0:
                 continue
             scale = cos_x / pdf * inv_s
-            o[k, 0], o[k, 1], o[k, 2] = pos[i, 0] + eps * gx, pos[i, 1] + eps * gy, pos[i, 2] + eps * gz
+            sx, sy, sz = area_point(spread, i, j, samples, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h, uvs, positions,
+                                    pos)
+            o[k, 0], o[k, 1], o[k, 2] = sx + eps * gx, sy + eps * gy, sz + eps * gz
             d[k, 0], d[k, 1], d[k, 2] = x, y, z
             t[k] = 1e37
             w[k, 0], w[k, 1], w[k, 2] = pixels[px, 0] * scale, pixels[px, 1] * scale, pixels[px, 2] * scale

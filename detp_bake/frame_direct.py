@@ -10,7 +10,7 @@ once for the rest.
 
 The test is conservative: a shadow ray from x to a light within a sphere (c, r) lies within r of
 the segment x–c, so a texel counts as near when that segment passes within r plus a box's
-half-diagonal of the box's centre. A sun is a long segment towards it, widened by its angle. A
+half-diagonal of the box's centre, plus how far from x its rays start (texel_area.spread_reach). A sun is a long segment towards it, widened by its angle. A
 world colour, an HDRI or emissive meshes light from anywhere: then, or when the lights change over
 the range, every texel is sampled every frame.
 """
@@ -24,6 +24,7 @@ import numpy as np
 
 from . import direct as direct_mod
 from .scene import AreaLight, PointLight, SpotLight, SunLight
+from .texel_area import spread_reach
 
 
 @dataclass
@@ -56,8 +57,9 @@ def _light_spheres(scene, reach: float) -> Optional[list]:
 
 
 @numba.njit(cache=True, parallel=True)
-def _near(pos, light_at, light_r, light_dir, box_c, box_r, out):
-    """out[i]: a shadow ray of texel i may pass near one of the boxes (spheres box_c, box_r)."""
+def _near(pos, slack, light_at, light_r, light_dir, box_c, box_r, out):
+    """out[i]: a shadow ray of texel i, starting within slack[i] of it, may pass near one of the boxes
+    (spheres box_c, box_r)."""
     for i in numba.prange(pos.shape[0]):
         out[i] = False
         for k in range(light_at.shape[0]):
@@ -74,7 +76,7 @@ def _near(pos, light_at, light_r, light_dir, box_c, box_r, out):
                     t = ((box_c[b, 0] - ax) * ux + (box_c[b, 1] - ay) * uy + (box_c[b, 2] - az) * uz) / uu
                     t = min(max(t, 0.0), 1.0)
                 qx, qy, qz = ax + t * ux - box_c[b, 0], ay + t * uy - box_c[b, 1], az + t * uz - box_c[b, 2]
-                reach = box_r[b] + light_r[k]
+                reach = box_r[b] + light_r[k] + slack[i]
                 if qx * qx + qy * qy + qz * qz <= reach * reach:
                     out[i] = True
                     break
@@ -96,7 +98,8 @@ def _near_texels(state, scene, texels) -> np.ndarray:
     centre = 0.5 * (boxes[:, 0] + boxes[:, 1])
     half = 0.5 * np.linalg.norm(boxes[:, 1] - boxes[:, 0], axis=1) * (1 + 1e-6) + 1e-6 * radius
     near = np.empty(len(texels), np.bool_)
-    _near(np.ascontiguousarray(texels.position), np.array([l[0] for l in lights]), np.array([l[1] for l in lights]),
+    _near(np.ascontiguousarray(texels.position), spread_reach(texels, scene), np.array([l[0] for l in lights]),
+          np.array([l[1] for l in lights]),
           np.array([l[2] for l in lights]), centre, half, near)
     return near | moving
 

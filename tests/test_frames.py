@@ -135,7 +135,8 @@ def test_direct_light_is_resampled_only_where_a_mover_can_shadow(tmp_path):
         fresh = compute(scene_at(frame, bounces=0), _settings(direct="sampled"))
         d = section["direct"]
         assert d["reused_texels"] + d["resampled_texels"] == len(fresh.texels)
-        assert d["reused_texels"] > 0.2 * len(fresh.texels)  # a big ball, three places, one lamp
+        # A big ball, three places, one lamp; shadow rays start anywhere on their texel (texel_area.py).
+        assert d["reused_texels"] > 0.15 * len(fresh.texels)
         for lm in fresh.texels.lightmaps:
             img = read_image(tmp_path / f"{lm.name}.hybrid.{frame:04d}.exr")[..., :3]
             assert np.array_equal(img, fresh.images[lm.name].astype(np.float32)), (frame, lm.name)
