@@ -51,7 +51,6 @@ POINT, SUN, AREA, MESH, WORLD, WORLD_MAP = 0, 1, 2, 3, 4, 5
 FAR = 1e37
 CHUNK = 2048  # texels per work item
 DEFAULT_SAMPLES = 16
-DELTA_SAMPLES = 4  # rays per texel for a point light or a sun without extent: spread over its square
 
 
 @dataclass
@@ -83,9 +82,9 @@ def direct_lights(scene: Scene, samples: int, spread: bool = True) -> list[Direc
     POINT: position(3) intensity RGB(3) radius axis(3) cos_half smooth is_spot;
     SUN: towards-sun direction(3) irradiance(3) cos_max;
     AREA: matrix rows 0-2 (12) emitting normal(3) size_x size_y is_disc P/π RGB(3);
-    WORLD: radiance(3). A point light or a sharp sun takes one ray per texel, or DELTA_SAMPLES
-    spread over the texel's square (`spread`)."""
-    delta = min(samples, DELTA_SAMPLES) if spread else 1
+    WORLD: radiance(3). A point light or a sharp sun takes one ray per texel, or `samples` spread
+    over the texel's middle (`spread`): four left a shadow edge's texels a quarter off Cycles' value."""
+    delta = samples if spread else 1
     out = []
     for light in scene.lights:
         if isinstance(light, (PointLight, SpotLight)):

@@ -1,13 +1,15 @@
-"""Points spread over a texel's square, for direct light averaged over the texel as Cycles does.
+"""Points spread over a texel's middle, for direct light averaged over the texel as Cycles does.
 
-Cycles bakes a texel as the mean of its samples, each at a point jittered over the texel's square
-and kept on the texel's triangle. Direct light read at the texel's centre differs from that mean
-wherever a shadow edge crosses the texel: at 64² per object the patio's roof, crossed by straight
-shadow edges along a texel row, read −4.7 % against Cycles (benchmarks/objects.py). So every
-shadow ray starts at its own point of the texel: the texel's centre offset by a low-discrepancy
-point of the square (Halton bases 3 and 5, so the points do not line up with the light's own
-Hammersley samples in bases 2 and 1/n), rotated per texel, and kept when it lies on the texel's
-triangle. A point off the triangle (a texel at a chart's border, partly covered) is replaced by
+Cycles bakes a texel as the mean of its samples, each at a point jittered round the texel's centre
+and kept on the texel's triangle. The jitter spans half a texel each way: Blender's bake takes the
+barycentric differentials as half the change per pixel (`bake_differentials` in its bake code,
+`A = 0.5f / A`), and Cycles offsets by them times a number in [−½, ½]. Direct light read at the
+centre differs from that mean wherever a shadow edge or a spot's rim crosses the texel: at 64² per
+object the patio's roof, crossed by straight shadow edges along a texel row, read −4.7 % against
+Cycles (benchmarks/objects.py). So every shadow ray starts at its own point: the texel's centre
+offset by a low-discrepancy point of the square SPAN texels wide (Halton bases 3 and 5, so the
+points do not line up with the light's own Hammersley samples in bases 2 and 1/n), rotated per
+texel, and kept when it lies on the texel's triangle (Cycles mirrors it back onto the triangle). A point off the triangle (a texel at a chart's border, partly covered) is replaced by
 the next point of the sequence, a few times, then by the texel's own position: the rays stay on the
 covered part, so seams keep their values.
 """
@@ -18,6 +20,7 @@ import numpy as np
 from .sampling import inline
 
 TRIES = 8  # points tried per sample before the texel's own position is used
+SPAN = 0.5  # the square's width in texels: Cycles' bake jitter
 
 
 @inline
@@ -34,8 +37,8 @@ def _radical_inverse(k, base):
 
 @inline
 def area_point(spread, i, j, samples, q0, q1, tri, cx, cy, sx, sy, uvs, positions, pos):
-    """Sample j of `samples` for texel i: a point of its square (centre cx, cy in pixels of an
-    sx × sy lightmap) on its triangle `tri[i]` (lightmap UVs `uvs`, world `positions`), rotated by
+    """Sample j of `samples` for texel i: a point of the square SPAN wide round its centre (cx, cy
+    in pixels of an sx × sy lightmap) on its triangle `tri[i]` (lightmap UVs `uvs`, world `positions`), rotated by
     (q0, q1); texel i's own position `pos[i]` when no tried point lies on the triangle, or when
     not `spread`."""
     if not spread:
@@ -51,8 +54,8 @@ def area_point(spread, i, j, samples, q0, q1, tri, cx, cy, sx, sy, uvs, position
             k = j + attempt * samples
             fx = _radical_inverse(k + 1, 3) + q0
             fy = _radical_inverse(k + 1, 5) + q1
-            x = cx[i] + fx - np.floor(fx) - 0.5
-            y = cy[i] + fy - np.floor(fy) - 0.5
+            x = cx[i] + SPAN * (fx - np.floor(fx) - 0.5)
+            y = cy[i] + SPAN * (fy - np.floor(fy) - 0.5)
             l0 = ((by - ey) * (x - ex) + (ex - bx) * (y - ey)) / den
             l1 = ((ey - ay) * (x - ex) + (ax - ex) * (y - ey)) / den
             l2 = 1.0 - l0 - l1
@@ -77,9 +80,9 @@ def texel_squares(texels) -> tuple:
 
 def spread_reach(texels, scene) -> np.ndarray:
     """Per texel, how far from its position its rays may start (a bound for the points area_point
-    returns): half its square's diagonal on its triangle, measured in world metres, when its centre
-    lies on the surface; the whole diagonal at a chart's border, where its position is the point of
-    its triangle nearest the centre, itself up to half a diagonal away."""
+    returns): half the diagonal of the SPAN-wide square on its triangle, in world metres, when its
+    centre lies on the surface; at a chart's border, where its position is the point of its
+    triangle nearest the centre, itself up to half a texel's diagonal away, that much more."""
     tri, _, _, sx, sy = texel_squares(texels)
     uv = scene.uvs[tri].astype(np.float64) * np.stack([sx, sy], axis=1)[:, None, :].astype(np.float64)
     p = scene.positions[tri].astype(np.float64)
@@ -90,4 +93,5 @@ def spread_reach(texels, scene) -> np.ndarray:
     # World vectors of one pixel step along u and along v: the inverse of the UV edge matrix.
     du = (f1 * e2[:, 1:2] - f2 * e1[:, 1:2]) / det[:, None]
     dv = (f2 * e1[:, 0:1] - f1 * e2[:, 0:1]) / det[:, None]
-    return np.where(texels.centre_inside, 0.5, 1.0) * (np.linalg.norm(du, axis=1) + np.linalg.norm(dv, axis=1))
+    return np.where(texels.centre_inside, 0.5 * SPAN, 0.5 + 0.5 * SPAN) * (np.linalg.norm(du, axis=1)
+                                                                          + np.linalg.norm(dv, axis=1))

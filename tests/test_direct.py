@@ -8,7 +8,7 @@ from detp_bake.direct import direct_irradiance
 from detp_bake.estimators import EstimatorSettings
 from detp_bake.photons import RayCaster
 from detp_bake.scene import AreaLight, PointLight, SpotLight, SunLight
-from detp_bake.texel_area import spread_reach
+from detp_bake.texel_area import SPAN, spread_reach
 from detp_bake.texels import rasterise
 from synthetic import grid, make_scene, uv_sphere
 
@@ -233,11 +233,11 @@ def _face(n):
 
 
 def _lit_fraction(sc, texels, lit, n=48):
-    """Per texel, the share of its square that lies on its own triangle and is lit (`lit(x, y)`),
-    by an n × n grid of points: what Cycles' jittered samples average to."""
+    """Per texel, the share of the square SPAN wide round its centre that lies on its own triangle
+    and is lit (`lit(x, y)`), by an n × n grid of points: what Cycles' jittered samples average to."""
     out = np.empty(len(texels))
     lm = texels.lightmaps[0]
-    grid_ = (np.arange(n) + 0.5) / n - 0.5
+    grid_ = SPAN * ((np.arange(n) + 0.5) / n - 0.5)
     fx, fy = [a.ravel() for a in np.meshgrid(grid_, grid_)]
     for k in range(len(texels)):
         t = texels.triangle[k]
@@ -254,17 +254,18 @@ def _lit_fraction(sc, texels, lit, n=48):
 
 def test_a_shadow_edge_across_texels_gives_each_its_lit_share():
     """A sun straight down and a plate whose edge crosses the floor's texels at 20°: each texel
-    reads S times the share of its square (on its triangle, as Cycles samples it) in the light,
+    reads S times the share of its middle (the square SPAN wide round its centre, on its
+    triangle, where Cycles samples it) in the light,
     not 0 or S by where its centre falls. 16 rays per texel: within 0.1 of the share (RMS) at the
     edge, and the floor's mean within 0.5 % of the lit area."""
     s, phi = 2.0, np.radians(20.0)
-    sun = SunLight("Sun", np.array([0.0, 0.0, -1.0]), np.full(3, s), angle=np.radians(0.2))
+    sun = SunLight("Sun", np.array([0.0, 0.0, -1.0]), np.full(3, s))  # sharp: --direct-samples rays all the same
     # The blocker: a 4 m square rotated by phi, its edge through (0.03, 0) on the line x·cos + y·sin = 0.03.
     cos, sin = np.cos(phi), np.sin(phi)
     corners = np.array([[0.03, -2.0], [2.03, -2.0], [2.03, 2.0], [0.03, 2.0]]) @ np.array([[cos, sin], [-sin, cos]])
     blocker = np.array([[[*corners[a], 0.5] for a in tri] for tri in ((0, 1, 2), (0, 2, 3))])
     blocker = (blocker, np.broadcast_to([0.0, 0.0, 1.0], blocker.shape).copy(), np.zeros((2, 3, 2)))
-    sc = make_scene([("Floor", grid(1.0, 1.0, 8), 0.5, True), ("Blocker", blocker, 0.5, False)], [sun], resolution=16)
+    sc = make_scene([("Floor", grid(1.0, 1.0, 8), 0.5, True), ("Blocker", blocker, 0.5, False)], [sun], resolution=32)
     texels, e, _ = _direct(sc, spread=True)
     share = _lit_fraction(sc, texels, lambda x, y: x * cos + y * sin < 0.03)
     edge = (share > 0.0) & (share < 1.0)
@@ -277,14 +278,14 @@ def test_a_shadow_edge_across_texels_gives_each_its_lit_share():
 
 
 def test_rays_start_within_the_reach_frame_ranges_allow_for():
-    """frame_direct widens its 'near a moving object' test by texel_area.spread_reach: half of one
-    pixel step along u plus one along v, in metres (a 2 × 1 m plate on an 8² lightmap: 0.1875), and
-    twice that at a chart's border, where a texel's centre lies off the plate."""
+    """frame_direct widens its 'near a moving object' test by texel_area.spread_reach: SPAN/2 of
+    one pixel step along u plus one along v, in metres, and half a step more at a chart's border,
+    where a texel's centre lies off the plate."""
     sc = make_scene([("Plate", grid(2.0, 1.0, 2, ), 0.5, True)], [], resolution=8)
     sc.uvs[:] = 0.1 + 0.8 * sc.uvs  # the plate's edges 0.3 pixel inside the outer texels' centres
     texels = rasterise(sc)
     reach = spread_reach(texels, sc)
     step = (2.0 + 1.0) / 6.4  # the UVs span 6.4 pixels
     assert texels.centre_inside.any() and not texels.centre_inside.all()
-    assert np.allclose(reach[texels.centre_inside], 0.5 * step)
-    assert np.allclose(reach[~texels.centre_inside], step)
+    assert np.allclose(reach[texels.centre_inside], 0.5 * SPAN * step)
+    assert np.allclose(reach[~texels.centre_inside], (0.5 + 0.5 * SPAN) * step)
