@@ -51,6 +51,7 @@ POINT, SUN, AREA, MESH, WORLD, WORLD_MAP = 0, 1, 2, 3, 4, 5
 FAR = 1e37
 CHUNK = 2048  # texels per work item
 DEFAULT_SAMPLES = 16
+FIRST_SAMPLES = 4  # a point light's or sharp sun's first rays per texel, spread over its middle
 
 
 @dataclass
@@ -61,6 +62,7 @@ class DirectLight:
     kind: int
     params: np.ndarray
     samples: int
+    extra: int = 0  # a light without extent, spread: rays added where the first `samples` disagree
     tri_cdf: np.ndarray = None
     tri_pos: np.ndarray = None
     tri_normal: np.ndarray = None
@@ -82,9 +84,11 @@ def direct_lights(scene: Scene, samples: int, spread: bool = True) -> list[Direc
     POINT: position(3) intensity RGB(3) radius axis(3) cos_half smooth is_spot;
     SUN: towards-sun direction(3) irradiance(3) cos_max;
     AREA: matrix rows 0-2 (12) emitting normal(3) size_x size_y is_disc P/π RGB(3);
-    WORLD: radiance(3). A point light or a sharp sun takes one ray per texel, or `samples` spread
-    over the texel's middle (`spread`): four left a shadow edge's texels a quarter off Cycles' value."""
-    delta = samples if spread else 1
+    WORLD: radiance(3). A point light or a sharp sun takes one ray per texel, or, spread over the
+    texel's middle (`spread`), FIRST_SAMPLES rays and `samples` more where they disagree (a shadow
+    edge crosses the texel): four alone left those texels a quarter off Cycles' value."""
+    delta = min(samples, FIRST_SAMPLES) if spread else 1
+    extra = samples if spread and samples > FIRST_SAMPLES else 0
     out = []
     for light in scene.lights:
         if isinstance(light, (PointLight, SpotLight)):
@@ -99,13 +103,13 @@ def direct_lights(scene: Scene, samples: int, spread: bool = True) -> list[Direc
             else:
                 spot = (np.zeros(3), -2.0, 0.0, 0.0)
             out.append(DirectLight(light.name, POINT, _row(light.position, intensity, radius, *spot),
-                                   samples if radius > 0.0 else delta))
+                                   samples if radius > 0.0 else delta, 0 if radius > 0.0 else extra))
         elif isinstance(light, SunLight):
             d = np.asarray(light.direction, np.float64)
             d = -d / np.linalg.norm(d)
             cos_max = float(np.cos(0.5 * light.angle)) if light.angle > 0.0 else 1.0
             out.append(DirectLight(light.name, SUN, _row(d, light.irradiance, cos_max),
-                                   samples if cos_max < 1.0 else delta))
+                                   samples if cos_max < 1.0 else delta, 0 if cos_max < 1.0 else extra))
         elif isinstance(light, AreaLight):
             m = np.asarray(light.matrix, np.float64)
             xy = np.cross(m[:3, 0], m[:3, 1])
@@ -145,7 +149,7 @@ def _mesh_light(scene: Scene, samples: int) -> Optional[DirectLight]:
     total = cdf[-1]
     cdf /= total
     per_pick = radiance * (area * total / w)[:, None]  # radiance × area / probability
-    return DirectLight("emissive meshes", MESH, np.zeros(32), samples, np.ascontiguousarray(cdf),
+    return DirectLight("emissive meshes", MESH, np.zeros(32), samples, 0, np.ascontiguousarray(cdf),
                        np.ascontiguousarray(p), np.ascontiguousarray(normal), np.ascontiguousarray(per_pick))
 
 
@@ -174,22 +178,25 @@ def _towards(sx, sy, sz, nx, ny, nz):
 
 
 @jit
-def _shadow_rays(kind, prm, samples, key, ids, a, b, pos, nrm, geo, eps,
+def _shadow_rays(kind, prm, j0, samples, stride, sel, key, ids, a, b, pos, nrm, geo, eps,
                  cdf, tpos, tnrm, trad, spread, sq_tri, sq_cx, sq_cy, sq_w, sq_h, uvs, positions, o, d, t, w, owner):
     """Rays for texels a … b−1 and one light: origins `o` (each at its own point of the texel's
     square: texel_area.py; offset along the geometric normal `geo`), unit directions `d`, far
     limits `t`, and `w` the RGB irradiance each adds when unoccluded (already divided by the sample
     count); `owner` the texel. Rays that cannot add anything (light behind the surface, outside a
-    spot cone) are left out. Returns the ray count."""
+    spot cone) are left out. Returns the ray count. Samples j0 … j0 + samples − 1 of `stride`, for
+    the texels `sel` when it is not empty (a top-up: direct_lights)."""
     k = 0
     inv_s = 1.0 / samples
-    for i in range(a, b):
+    todo = sel.shape[0] if sel.shape[0] > 0 else b - a
+    for q in range(todo):
+        i = sel[q] if sel.shape[0] > 0 else a + q
         nx, ny, nz = nrm[i, 0], nrm[i, 1], nrm[i, 2]
         gx, gy, gz = geo[i, 0], geo[i, 1], geo[i, 2]
         state, r0, r1 = uniform2(photon_rng(key, ids[i]))
         state, q0, q1 = uniform2(state)
-        for j in range(samples):
-            px, py, pz = area_point(spread, i, j, samples, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h, uvs, positions,
+        for j in range(j0, j0 + samples):
+            px, py, pz = area_point(spread, i, j, stride, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h, uvs, positions,
                                     pos)
             ox, oy, oz = px + eps * gx, py + eps * gy, pz + eps * gz
             u0 = (j + 0.5) * inv_s + r0
@@ -407,6 +414,7 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     empty_cdf = np.zeros(1)
     empty_tri = np.zeros((1, 3, 3))
     empty_vec = np.zeros((1, 3))
+    no_texels = np.zeros(0, np.int64)
     chunks = [(a, min(n, a + CHUNK)) for a in range(0, n, CHUNK)]
     rays = [0] * len(chunks)
     done = [0]
@@ -416,32 +424,53 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
         if cancel is not None and cancel():
             raise BakeCancelled()
         a, b = chunks[index]
-        most = (b - a) * max(l.samples for l in lights)
+        most = (b - a) * max(max(l.samples, l.extra) for l in lights)
         o = np.empty((most, 3), np.float32)
         d = np.empty((most, 3), np.float32)
         t = np.empty(most, np.float32)
         w = np.empty((most, 3))
         owner = np.empty(most, np.int64)
         acc = np.zeros((b - a, 3))
-        for li, light in enumerate(lights):
-            key = seed_key(seed * 7919 + 1000003 * (li + 1))
+
+        def cast(light, key, j0, count, sel, into):
+            """Rays of `light` (samples j0 … j0 + count − 1) into `into`; per texel of the chunk, how
+            many of them arrived (for a top-up), or None."""
             mesh = light.kind == MESH
             if light.kind == WORLD_MAP:
-                k = environment_rays(*light.env, light.samples, key, ids, a, b, pos, nrm, geo, eps, spread, *squares, uvs,
-                                     positions, o, d, t, w, owner)
+                k = environment_rays(*light.env, light.samples, key, ids, a, b, pos, nrm, geo, eps, spread, *squares,
+                                     uvs, positions, o, d, t, w, owner)
             else:
-                k = _shadow_rays(light.kind, light.params, light.samples, key, ids, a, b, pos, nrm, geo, eps,
-                                 light.tri_cdf if mesh else empty_cdf, light.tri_pos if mesh else empty_tri,
-                                 light.tri_normal if mesh else empty_vec,
+                k = _shadow_rays(light.kind, light.params, j0, count, light.samples + light.extra, sel, key, ids, a, b,
+                                 pos, nrm, geo, eps, light.tri_cdf if mesh else empty_cdf,
+                                 light.tri_pos if mesh else empty_tri, light.tri_normal if mesh else empty_vec,
                                  light.tri_radiance if mesh else empty_vec, spread, *squares, uvs, positions, o, d, t, w,
                                  owner)
             if k == 0:
-                continue
+                return np.zeros(b - a, np.int64) if light.extra else None
             if srf.cutout:
-                _gather_weighted(k, transmittance(caster, srf, o[:k], d[:k], t[:k], eps), w, owner, a, acc)
+                passed = transmittance(caster, srf, o[:k], d[:k], t[:k], eps)
+                _gather_weighted(k, passed, w, owner, a, into)
+                arrived = passed > 0.0
             else:
-                _gather(k, caster.occluded(o[:k], d[:k], t[:k]), w, owner, a, acc)
+                occluded = caster.occluded(o[:k], d[:k], t[:k])
+                _gather(k, occluded, w, owner, a, into)
+                arrived = occluded < 0
             rays[index] += k
+            return np.bincount(owner[:k][arrived] - a, minlength=b - a) if light.extra else None
+
+        for li, light in enumerate(lights):
+            key = seed_key(seed * 7919 + 1000003 * (li + 1))
+            own = np.zeros((b - a, 3))
+            arrived = cast(light, key, 0, light.samples, no_texels, own)
+            if light.extra:
+                # Some first rays blocked, some not: a shadow edge crosses the texel's middle.
+                mixed = np.flatnonzero((arrived > 0) & (arrived < light.samples))
+                if mixed.size:
+                    more = np.zeros((b - a, 3))
+                    cast(light, key, light.samples, light.extra, (mixed + a).astype(np.int64), more)
+                    n0, n1 = light.samples, light.extra
+                    own[mixed] = (n0 * own[mixed] + n1 * more[mixed]) / (n0 + n1)
+            acc += own
         out[a:b] = acc
         with lock:
             done[0] += 1
