@@ -52,6 +52,7 @@ FAR = 1e37
 CHUNK = 2048  # texels per work item
 DEFAULT_SAMPLES = 16
 FIRST_SAMPLES = 4  # a point light's or sharp sun's first rays per texel, spread over its middle
+DISAGREE = 0.05  # ... and more where they differ by more than this share of the largest
 
 
 @dataclass
@@ -86,7 +87,7 @@ def direct_lights(scene: Scene, samples: int, spread: bool = True) -> list[Direc
     AREA: matrix rows 0-2 (12) emitting normal(3) size_x size_y is_disc P/π RGB(3);
     WORLD: radiance(3). A point light or a sharp sun takes one ray per texel, or, spread over the
     texel's middle (`spread`), FIRST_SAMPLES rays and `samples` more where they disagree (a shadow
-    edge crosses the texel): four alone left those texels a quarter off Cycles' value."""
+    edge or a spot's rim crosses the texel): four alone left those texels a quarter off Cycles'."""
     delta = min(samples, FIRST_SAMPLES) if spread else 1
     extra = samples if spread and samples > FIRST_SAMPLES else 0
     out = []
@@ -307,6 +308,17 @@ def _shadow_rays(kind, prm, j0, samples, stride, sel, key, ids, a, b, pos, nrm, 
     return k
 
 
+def _disagree(value: np.ndarray, texel: np.ndarray, n: int, samples: int) -> np.ndarray:
+    """Per texel (0 … n−1), whether its rays' values (`value`, ray by ray; rays left out count as 0)
+    differ by more than DISAGREE of the largest."""
+    high = np.zeros(n)
+    np.maximum.at(high, texel, value)
+    low = np.full(n, np.inf)
+    np.minimum.at(low, texel, value)
+    low[np.bincount(texel, minlength=n) < samples] = 0.0
+    return (high > 0.0) & (high - low > DISAGREE * high)
+
+
 @jit
 def _gather(n, occluded, w, owner, base, out):
     for k in range(n):
@@ -433,8 +445,8 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
         acc = np.zeros((b - a, 3))
 
         def cast(light, key, j0, count, sel, into):
-            """Rays of `light` (samples j0 … j0 + count − 1) into `into`; per texel of the chunk, how
-            many of them arrived (for a top-up), or None."""
+            """Rays of `light` (samples j0 … j0 + count − 1) into `into`; for a light with a top-up,
+            which texels of the chunk its rays disagree on, else None."""
             mesh = light.kind == MESH
             if light.kind == WORLD_MAP:
                 k = environment_rays(*light.env, light.samples, key, ids, a, b, pos, nrm, geo, eps, spread, *squares,
@@ -446,25 +458,25 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
                                  light.tri_radiance if mesh else empty_vec, spread, *squares, uvs, positions, o, d, t, w,
                                  owner)
             if k == 0:
-                return np.zeros(b - a, np.int64) if light.extra else None
+                return np.zeros(b - a, bool) if light.extra else None
             if srf.cutout:
                 passed = transmittance(caster, srf, o[:k], d[:k], t[:k], eps)
                 _gather_weighted(k, passed, w, owner, a, into)
-                arrived = passed > 0.0
+                arrived = passed
             else:
                 occluded = caster.occluded(o[:k], d[:k], t[:k])
                 _gather(k, occluded, w, owner, a, into)
                 arrived = occluded < 0
             rays[index] += k
-            return np.bincount(owner[:k][arrived] - a, minlength=b - a) if light.extra else None
+            return _disagree(w[:k].sum(axis=1) * arrived, owner[:k] - a, b - a, count) if light.extra else None
 
         for li, light in enumerate(lights):
             key = seed_key(seed * 7919 + 1000003 * (li + 1))
             own = np.zeros((b - a, 3))
-            arrived = cast(light, key, 0, light.samples, no_texels, own)
+            mixed = cast(light, key, 0, light.samples, no_texels, own)
             if light.extra:
-                # Some first rays blocked, some not: a shadow edge crosses the texel's middle.
-                mixed = np.flatnonzero((arrived > 0) & (arrived < light.samples))
+                # A shadow edge, a spot's rim or the light's horizon crosses the texel's middle.
+                mixed = np.flatnonzero(mixed)
                 if mixed.size:
                     more = np.zeros((b - a, 3))
                     cast(light, key, light.samples, light.extra, (mixed + a).astype(np.int64), more)
