@@ -61,6 +61,18 @@ def test_sites_benchmark(tmp_path):
 
 
 @pytest.mark.blender  # its scenes are .blend files
+def test_lights_benchmark(tmp_path):
+    out = tmp_path / "lights.json"
+    text = _run("lights.py", "--scenes", "l_room", "--resolution", "16", "--samples", "4", "--reference", "32",
+                "--json", str(out))
+    doc = json.loads(out.read_text())
+    assert [r["shared"] for r in doc["rows"]] == [False, True]
+    plain, shared = doc["rows"]
+    assert plain["shared_lights"] == 0 and shared["shared_lights"] == 2
+    assert 0 < shared["rmse"] < 1 and 0 < plain["rmse"] < 1 and len(doc["summary"]) == 1 and "efficient" in text
+
+
+@pytest.mark.blender  # its scenes are .blend files
 def test_quality_benchmark(tmp_path):
     _run("quality.py", "--quick", "--scenes", "cornell_box", "--sweep-scene", "cornell_box",
          "--compositor-check", "--out", str(tmp_path))
