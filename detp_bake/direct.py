@@ -1,16 +1,16 @@
 """Direct light at every texel by sampling the lights with shadow rays (the first pass of the
 classic two-pass split; DESIGN.md §7).
 
-Direct light holds the hard shadows and most of the energy, and a density estimate blurs it over
-its disc. Sampled here, it has no blur at all. Each ray starts at its own point of the texel's
-middle, as Cycles' bake jitters a texel (texel_area.py): a point light or a sharp sun takes
-FIRST_SAMPLES rays per texel and `samples` more where those disagree (a shadow edge or a spot's
-rim in the texel), a light with extent `samples` stratified rays (a Hammersley set, rotated per texel and light by a
-random offset so neighbouring texels do not share a pattern). A texel's random numbers are keyed
-by what it is (its object's name and its pixel: `texel_ids`), not by its place among the texels
-baked, so its direct light does not change with the other objects baked alongside it. The photons then carry only the
-indirect part (`PhotonTracer(indirect_only=True)`), which is smooth, so the estimators' discs cost
-little accuracy there.
+Direct light holds the hard shadows and most of the energy, and a density estimate blurs it over its
+disc. Sampled here, it has no blur at all. Each ray starts at its own point of the texel's middle,
+as Cycles' bake jitters a texel (texel_area.py): a point light or a sharp sun takes FIRST_SAMPLES
+rays per texel and `samples` more where those disagree (a shadow edge or a spot's rim in the texel),
+a light with extent `samples` stratified rays (a Hammersley set, rotated per texel and light by a
+random offset so neighbouring texels do not share a pattern). A texel's random numbers are keyed by
+what it is (its object's name and its pixel: `texel_ids`), not by its place among the texels baked,
+so its direct light does not change with the other objects baked alongside it. The photons then
+carry only the indirect part (`PhotonTracer(indirect_only=True)`), which is smooth, so the
+estimators' discs cost little accuracy there.
 
 Units as everywhere in the core: irradiance E in W/m² (the bake stores E/π, Cycles' unit):
 - point/spot light of power P: intensity P/(4π) W/sr; with a radius, a sphere of that power,
@@ -517,12 +517,11 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
                 k = environment_rays(*light.env, light.samples, key, ids, a, b, pos, nrm, geo, eps, spread, *squares,
                                      uvs, positions, o, d, t, w, owner)
             else:
-                k = _shadow_rays(light.kind, light.params, j0, count, light.samples + light.extra, sel, counts, key, ids,
-                                 a, b,
-                                 pos, nrm, geo, eps, light.tri_cdf if mesh else empty_cdf,
+                k = _shadow_rays(light.kind, light.params, j0, count, light.samples + light.extra, sel, counts, key,
+                                 ids, a, b, pos, nrm, geo, eps, light.tri_cdf if mesh else empty_cdf,
                                  light.tri_pos if mesh else empty_tri, light.tri_normal if mesh else empty_vec,
-                                 light.tri_radiance if mesh else empty_vec, spread, *squares, uvs, positions, o, d, t, w,
-                                 owner)
+                                 light.tri_radiance if mesh else empty_vec, spread, *squares, uvs, positions,
+                                 o, d, t, w, owner)
             if k == 0:
                 return np.zeros(b - a, bool) if light.extra else None
             if srf.cutout:

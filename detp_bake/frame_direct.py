@@ -8,11 +8,11 @@ a set of their own, the same set every frame, and each keeps its random numbers 
 (direct.py draws them per texel, keyed by its object and pixel), so nothing flickers; the first frame samples every texel
 once for the rest.
 
-The test is conservative: a shadow ray from x to a light within a sphere (c, r) lies within r of
-the segment x–c, so a texel counts as near when that segment passes within r plus a box's
-half-diagonal of the box's centre, plus how far from x its rays start (texel_area.spread_reach). A sun is a long segment towards it, widened by its angle. A
-world colour, an HDRI or emissive meshes light from anywhere: then, or when the lights change over
-the range, every texel is sampled every frame.
+The test is conservative: a shadow ray from x to a light within a sphere (c, r) lies within r of the
+segment x–c, so a texel counts as near when that segment passes within r plus a box's half-diagonal
+of the box's centre, plus how far from x its rays start (texel_area.spread_reach). A sun is a long
+segment towards it, widened by its angle. A world colour, an HDRI or emissive meshes light from
+anywhere: then, or when the lights change over the range, every texel is sampled every frame.
 """
 from __future__ import annotations
 

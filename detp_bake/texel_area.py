@@ -3,15 +3,16 @@
 Cycles bakes a texel as the mean of its samples, each at a point jittered round the texel's centre
 and kept on the texel's triangle. The jitter spans half a texel each way: Blender's bake takes the
 barycentric differentials as half the change per pixel (`bake_differentials` in its bake code,
-`A = 0.5f / A`), and Cycles offsets by them times a number in [−½, ½]. Direct light read at the
-centre differs from that mean wherever a shadow edge or a spot's rim crosses the texel: at 64² per
-object the patio's roof, crossed by straight shadow edges along a texel row, read −4.7 % against
-Cycles (benchmarks/objects.py). So every shadow ray starts at its own point: the texel's centre
-offset by a low-discrepancy point of the square SPAN texels wide (Halton bases 3 and 5, so the
-points do not line up with the light's own Hammersley samples in bases 2 and 1/n), rotated per
-texel, and kept when it lies on the texel's triangle (Cycles mirrors it back onto the triangle). A point off the triangle (a texel at a chart's border, partly covered) is replaced by
-the next point of the sequence, a few times, then by the texel's own position: the rays stay on the
-covered part, so seams keep their values.
+`A = 0.5f / A`), and Cycles offsets by them times a number in [−½, ½]. Direct light read at the centre
+differs from that mean wherever a shadow edge or a spot's rim crosses the texel: at 64² per object
+the patio's roof, crossed by straight shadow edges along a texel row, read −4.7 % against Cycles
+(benchmarks/objects.py). So every shadow ray starts at its own point: the texel's centre offset by a
+low-discrepancy point of the square SPAN texels wide (Halton bases 3 and 5, so the points do not
+line up with the light's own Hammersley samples in bases 2 and 1/n), rotated per texel, and kept
+when it lies on the texel's triangle (Cycles mirrors it back onto the triangle). A point off the
+triangle (a texel at a chart's border, partly covered) is replaced by the next point of the
+sequence, a few times, then by the texel's own position: the rays stay on the covered part, so seams
+keep their values.
 """
 from __future__ import annotations
 
