@@ -25,7 +25,7 @@ from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
 from .estimators.discs import SLAB, capped_radius, disc_radius
-from .estimators.rise import own_surface_rise, piece_extent
+from .estimators.rise import own_surface_rise, piece_extent, welded_pieces
 from .photons import PhotonBatch, PhotonTracer, RayCaster, TraceStats
 from .scene import Scene
 
@@ -348,10 +348,11 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     if discs:
         report(Progress("prepare", 0.0, "Measuring disc clearance"))
         # A disc no wider than the piece of surface it lies on (a leaf card): rise.piece_extent.
-        extent = piece_extent(at, scene)
+        welds = welded_pieces(at, scene)
+        extent = piece_extent(at, scene, welds)
         radius = capped_radius(radius, extent)
         clearance = texels_mod.tangent_clearance(at, scene.positions, radius, 0.5 * SLAB * radius)
-        rise = own_surface_rise(at, scene, radius)
+        rise = own_surface_rise(at, scene, radius, welds)
     clearance_seconds = time.perf_counter() - t0
     context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
                                  clearance=clearance, rise=rise, extent=extent, frames=frame_state)

@@ -155,8 +155,9 @@ def _mesh_light(scene: Scene, samples: int) -> Optional[DirectLight]:
     total = cdf[-1]
     cdf /= total
     per_pick = radiance * (area * total / w)[:, None]  # radiance × area / probability
-    return DirectLight("emissive meshes", MESH, np.zeros(32), samples, 0, np.ascontiguousarray(cdf),
-                       np.ascontiguousarray(p), np.ascontiguousarray(normal), np.ascontiguousarray(per_pick))
+    return DirectLight("emissive meshes", MESH, np.zeros(32), samples, tri_cdf=np.ascontiguousarray(cdf),
+                       tri_pos=np.ascontiguousarray(p), tri_normal=np.ascontiguousarray(normal),
+                       tri_radiance=np.ascontiguousarray(per_pick))
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -318,7 +319,7 @@ def _shadow_rays(kind, prm, j0, samples, stride, sel, counts, key, ids, a, b, po
 
 
 @jit
-def light_shares(kinds, params, idx, samples, a, b, pos, nrm, out):
+def light_shares(kinds, params, samples, a, b, pos, nrm, out):
     """out[i − a, m]: shadow rays of texel i for shared light m, out of samples × (number of lights):
     in proportion to the light's unshadowed irradiance at the texel's centre (a sphere or an area
     light as a point no closer than its size, a sun's axis), each light at least one ray so that
@@ -330,7 +331,7 @@ def light_shares(kinds, params, idx, samples, a, b, pos, nrm, out):
         nx, ny, nz = nrm[i, 0], nrm[i, 1], nrm[i, 2]
         total = 0.0
         for q in range(m):
-            prm = params[idx[q]]
+            prm = params[q]
             kind = kinds[q]
             wq = 0.0
             if kind == SUN:
@@ -491,7 +492,6 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
         shared = []
     kinds = np.array([lights[i].kind for i in shared], np.int64)
     params = np.array([lights[i].params for i in shared], np.float64) if shared else np.zeros((0, 32))
-    shared_idx = np.arange(len(shared), dtype=np.int64)
     chunks = [(a, min(n, a + CHUNK)) for a in range(0, n, CHUNK)]
     rays = [0] * len(chunks)
     done = [0]
@@ -538,15 +538,15 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
         shares = None
         if shared:
             shares = np.empty((b - a, len(shared)), np.int64)
-            light_shares(kinds, params, shared_idx, samples, a, b, pos, nrm, shares)
+            light_shares(kinds, params, samples, a, b, pos, nrm, shares)
         for li, light in enumerate(lights):
             key = seed_key(seed * 7919 + 1000003 * (li + 1))
             own = np.zeros((b - a, 3))
             counts = shares[:, shared.index(li)].copy() if li in shared else no_counts
-            mixed = cast(light, key, 0, light.samples, no_texels, own, counts)
+            disagree = cast(light, key, 0, light.samples, no_texels, own, counts)
             if light.extra:
                 # A shadow edge, a spot's rim or the light's horizon crosses the texel's middle.
-                mixed = np.flatnonzero(mixed)
+                mixed = np.flatnonzero(disagree)
                 if mixed.size:
                     more = np.zeros((b - a, 3))
                     cast(light, key, light.samples, light.extra, (mixed + a).astype(np.int64), more)

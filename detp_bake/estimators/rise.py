@@ -109,42 +109,50 @@ def _rise(position, normal, radius, piece, cell):
     return out
 
 
-def piece_extent(texels: TexelSet, scene) -> np.ndarray:
+def welded_pieces(texels: TexelSet, scene) -> list:
+    """Per lightmap, its object's mesh welded into pieces (`_welded`): computed once, read by both
+    piece_extent and own_surface_rise."""
+    return [_welded(scene.positions[scene.objects[lm.object_index].triangles]) for lm in texels.lightmaps]
+
+
+def piece_extent(texels: TexelSet, scene, welds=None) -> np.ndarray:
     """Per texel: the radius of a disc with the area of its own welded piece of mesh, sqrt(A/π).
 
     A disc wider than the surface it lies on reads the light in the air around that surface. On a
     leaf card in a crown, where light falls steeply from the crown's shell inwards, that read the
     crowns' indirect light 2–3 % high with 3-texel discs (benchmarks/objects.py); discs no wider
-    than their leaf take it under 1 %. Large pieces (walls, floors) are far wider than any disc."""
+    than their leaf take it under 1 %. Large pieces (walls, floors) are far wider than any disc.
+    `welds`: welded_pieces, when the caller has them."""
     out = np.full(len(texels), np.inf)
-    for lm in texels.lightmaps:
+    welds = welded_pieces(texels, scene) if welds is None else welds
+    for lm, (tri_piece, _, _) in zip(texels.lightmaps, welds):
         sl = lm.texels
         obj = scene.objects[lm.object_index]
         tris = scene.positions[obj.triangles]
         if len(tris) == 0:
             continue
-        tri_piece = _welded(tris)[0]
         area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
         piece_area = np.bincount(tri_piece, weights=area.astype(np.float64))
         out[sl] = np.sqrt(piece_area[tri_piece[texels.triangle[sl] - obj.first_triangle]] / np.pi)
     return out
 
 
-def own_surface_rise(texels: TexelSet, scene, radius: np.ndarray) -> np.ndarray:
+def own_surface_rise(texels: TexelSet, scene, radius: np.ndarray, welds=None) -> np.ndarray:
     """Per texel: how high its own surface rises in front of its tangent plane at `radius`: from
     the texels of its own lightmap on the same piece of its object's mesh, between r/2 and 2r
     away, each one's height carried to the rim as h·r²/ρ² (exact on spheres and cylinders, more
     than enough at creases). 0 on a flat piece. Where no such texel exists (a leaf of a texel or
     two, or texels sparser than the disc), a piece of at most SMALL_PIECE vertices gives the
-    height of its highest vertex; a larger one inf: the bake then keeps the full slab."""
+    height of its highest vertex; a larger one inf: the bake then keeps the full slab. `welds`:
+    welded_pieces, when the caller has them."""
     out = np.full(len(texels), np.inf)
-    for lm in texels.lightmaps:
+    welds = welded_pieces(texels, scene) if welds is None else welds
+    for lm, (tri_piece, vertices, vertex_piece) in zip(texels.lightmaps, welds):
         sl = lm.texels
         r = np.ascontiguousarray(radius[sl], np.float64)
         if r.size == 0 or not np.isfinite(r).all() or r.max() <= 0.0:
             continue
         obj = scene.objects[lm.object_index]
-        tri_piece, vertices, vertex_piece = _welded(scene.positions[obj.triangles])
         piece = np.ascontiguousarray(tri_piece[texels.triangle[sl] - obj.first_triangle])
         position = np.ascontiguousarray(texels.position[sl], np.float64)
         normal = np.ascontiguousarray(texels.normal[sl], np.float64)
