@@ -14,8 +14,9 @@ Methods (each bakes every mesh of the scene at the configuration's resolution):
   seconds are the bake's plus the denoiser's. `--compositor-check` denoises one bake through the
   Denoise node itself and prints how far the two outputs lie apart;
 - `cycles+oidn-lm`: the same with OIDN's RTLightmap filter (no guide), the filter our bake uses;
-- ours, a ladder of photon counts: `<estimator>` is the default bake (direct light by shadow rays,
-  the estimator on indirect light, OIDN RTLightmap); `<estimator>/no-denoise` the same bake's
+- ours, a ladder of photon counts: `<estimator>` is the default pipeline (direct light by shadow
+  rays, the estimator on indirect light, OIDN RTLightmap) with that estimator, `texel_histogram`
+  being the default one; `<estimator>/no-denoise` the same bake's
   lightmaps before denoising, its seconds without the denoiser's (read off the same run);
   `<estimator>/photons` the paper's mode (the estimator sees every segment, no denoising).
 
@@ -35,8 +36,8 @@ below STOP. From each method's points: the time to reach 5 % and 3 %, interpolat
 axes, and its ratio to Cycles + OIDN's, in wall and in CPU seconds ("≤": reached by the cheapest
 run already, so an upper bound).
 
-The sweeps (`--sweep-scene`) bake the default method with other disc radii (`radius_texels`) and
-shadow-ray counts (`direct_samples`) and compare them at equal CPU seconds. Writes quality.json,
+The sweeps (`--sweep-scene`) bake the default pipeline with `disc_index` at other disc radii
+(`radius_texels`) and shadow-ray counts (`direct_samples`) and compare them at equal CPU seconds. Writes quality.json,
 quality.md and one error/time plot per scene (plus one for the sweeps) under OUT, the plots also
 under --figures when given.
 """
@@ -65,28 +66,31 @@ from detp_bake.bake import BakeSettings, compute  # noqa: E402
 TARGETS = (0.05, 0.03)
 STOP = 0.8 * min(TARGETS)  # a ladder whose error is below this has its times to the targets
 RIVAL = "cycles+oidn"
+FULL_LADDERS = 2
 CONFIGS = {
     "quick": dict(resolution=16, reference_spp=16, spp=[4, 8], photons=[10_000, 30_000],
-                  estimators=["disc_index", "photon_map"], extra_photons=[10_000, 30_000],
+                  estimators=["texel_histogram", "disc_index", "photon_map"], extra_photons=[10_000, 30_000],
                   old_mode=["disc_index"], old_mode_max=30_000, sweep_photons=[10_000, 30_000],
                   radius_texels=[1.5, 3.0], direct_samples=[4, 16], scene_resolution={},
                   scene_reference_spp={}, scene_spp={}),
     # sphere_cache finds exactly disc_index's crossings (same lightmaps, 5-7x the time): full only.
     "short": dict(resolution=64, reference_spp=2048, spp=[2, 4, 8, 16, 32, 64, 128, 256],
                   photons=[62_500, 125_000, 250_000, 500_000, 1_000_000, 2_000_000, 4_000_000, 8_000_000],
-                  estimators=["disc_index", "photon_map"], extra_photons=[250_000, 1_000_000, 4_000_000],
+                  estimators=["texel_histogram", "disc_index", "photon_map"],
+                  extra_photons=[250_000, 1_000_000, 4_000_000],
                   old_mode=["disc_index"], old_mode_max=4_000_000, sweep_photons=[250_000, 1_000_000, 4_000_000],
                   radius_texels=[1.0, 1.5, 2.0, 3.0, 4.0], direct_samples=[4, 8, 16, 32],
                   scene_resolution={}, scene_reference_spp={"window_room": 4096},
                   scene_spp={"window_room": [2, 4, 8, 16, 32, 64, 128, 256, 512]}),
     "full": dict(resolution=128, reference_spp=4096, spp=[2, 4, 8, 16, 32, 64, 128, 256, 512, 1024],
                  photons=[250_000, 500_000, 1_000_000, 2_000_000, 4_000_000, 8_000_000, 16_000_000],
-                 estimators=["disc_index", "sphere_cache", "photon_map"],
+                 estimators=["texel_histogram", "disc_index", "sphere_cache", "photon_map"],
                  extra_photons=[500_000, 2_000_000, 8_000_000], old_mode=["disc_index", "sphere_cache", "photon_map"],
                  old_mode_max=16_000_000, sweep_photons=[500_000, 2_000_000, 8_000_000],
                  radius_texels=[1.0, 1.5, 2.0, 3.0, 4.0, 6.0], direct_samples=[2, 4, 8, 16, 32, 64],
                  scene_resolution={}, scene_reference_spp={"window_room": 16384}, scene_spp={}),
 }
+SWEPT = "disc_index"  # the sweeps' estimator: the disc radius is its knob
 PLOT_SKIP = {"cycles+oidn-lm", "photon_map/no-denoise", "sphere_cache/no-denoise"}  # in the tables only
 LABELS = {
     "cycles": "Cycles bake, raw",
@@ -294,10 +298,11 @@ def bench_scene(label_, cfg, cache, log):
 
     # Ladders, interleaved by cost: step i runs Cycles at the i-th sample count and each of ours at
     # the i-th photon count. A ladder stops once more runs cannot change its times to the targets
-    # (below STOP); the first estimator climbs the whole photon ladder, the others fixed counts.
+    # (below STOP); the first FULL_LADDERS estimators climb the whole photon ladder (the default and
+    # the best DETP estimator), the others fixed counts.
     ladders = [("cycles", list(cfg["spp"]), run_cycles)]
     for k, name in enumerate(cfg["estimators"]):
-        counts = cfg["photons"] if k == 0 else [p for p in cfg["photons"] if p in cfg["extra_photons"]]
+        counts = cfg["photons"] if k < FULL_LADDERS else [p for p in cfg["photons"] if p in cfg["extra_photons"]]
         ladders.append((name, counts, lambda p, n=name: run_ours(n, p, False)))
     for name in cfg["old_mode"]:
         counts = [p for p in cfg["photons"] if p <= cfg["old_mode_max"]]
@@ -317,7 +322,8 @@ def bench_scene(label_, cfg, cache, log):
 
 
 def sweep_scene(label_, cfg, cache, log):
-    """The default method on one scene with other disc radii and shadow-ray counts, interleaved."""
+    """`disc_index` in the default pipeline on one scene with other disc radii and shadow-ray counts,
+    interleaved."""
     cfg = for_scene(cfg, label_)
     res = cfg["res"]
     scene = scenes.blend_scene(label_, res)
@@ -325,7 +331,7 @@ def sweep_scene(label_, cfg, cache, log):
     from detp_bake import blender
     names = [o.name for o in scene.objects]
     ref, halves, _ = reference(bpy, blender, label_, names, res, cfg["ref_spp"], cache, log)
-    base = BakeSettings()
+    base = BakeSettings(estimator=SWEPT)
     if base.estimator_settings.radius_texels is None:  # the bake picks the radius by direct mode
         from detp_bake import estimators
         wide = getattr(estimators, "RADIUS_TEXELS_INDIRECT" if base.direct == "sampled" else "RADIUS_TEXELS_ALL")
@@ -486,7 +492,8 @@ def markdown(results, sweeps, cores, threads):
             out.append(f"| {label(method)} | {cells} |")
         out.append("")
     for sw in sweeps:
-        out.append(f"### Sweeps on {sw['scene']} ({sw['resolution']}², default method; at equal CPU seconds)\n")
+        out.append(f"### Sweeps on {sw['scene']} ({sw['resolution']}², {SWEPT} in the default pipeline; "
+                   "at equal CPU seconds)\n")
         for knob, s in sw["summary"].items():
             at = s["at_seconds"]
             out.append(f"`{knob}` (others at their defaults); RMSE at {at:.1f} CPU s, best: **{s['best']}**\n"

@@ -28,6 +28,8 @@ import numpy as np  # noqa: E402
 
 from detp_bake.bake import BakeSettings, compute  # noqa: E402
 
+ESTIMATOR = "disc_index"  # sites serve the disc estimators (the texel histogram estimates every texel)
+
 
 def rmse(result, ref) -> float:
     diff, base = [], []
@@ -55,14 +57,16 @@ def main(argv=None):
     for res in [int(r) for r in args.resolutions.split(",")]:
         with scenes.quiet_stdout():
             sc = scenes.blend_scene(args.scene, res)
-        ref = compute(sc, BakeSettings(photons=args.reference, resolution=res, indirect_spacing=1, seed=99))
+        ref = compute(sc, BakeSettings(estimator=ESTIMATOR, photons=args.reference, resolution=res, indirect_spacing=1,
+                                       seed=99))
         for spacing in (1, 2):  # kernels loaded outside the timings
-            compute(sc, BakeSettings(photons=2000, resolution=res, indirect_spacing=spacing))
+            compute(sc, BakeSettings(estimator=ESTIMATOR, photons=2000, resolution=res, indirect_spacing=spacing))
         for photons in photon_counts:
             for seed in range(1, args.seeds + 1):
                 for spacing in (1, 2):
                     t0 = time.perf_counter()
-                    r = compute(sc, BakeSettings(photons=photons, resolution=res, indirect_spacing=spacing, seed=seed))
+                    r = compute(sc, BakeSettings(estimator=ESTIMATOR, photons=photons, resolution=res,
+                                                 indirect_spacing=spacing, seed=seed))
                     wall = time.perf_counter() - t0
                     row = {"resolution": res, "photons": photons, "spacing": spacing, "seed": seed, "seconds": wall,
                            "rmse": rmse(r, ref), "sites": r.direct["indirect_sites"], "texels": len(r.texels),

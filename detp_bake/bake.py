@@ -39,7 +39,9 @@ MAX_SPACING = 8
 
 @dataclass
 class BakeSettings:
-    estimator: str = "disc_index"
+    # texel_histogram: with shadow rays for direct light and OIDN, the best lightmap per second on
+    # every scene measured (README, benchmarks/quality.py); disc_index: the best without a denoiser.
+    estimator: str = "texel_histogram"
     photons: int = 1_000_000
     # sampled: direct light by shadow rays at every texel, the estimator sees indirect light only;
     # photons: the estimator sees every segment (the paper's experiments).
@@ -305,7 +307,8 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     need = _check_memory(scene, settings, names, batch_size, per_photon, per_photon_kept)
     t0 = time.perf_counter()
     texels = texels_mod.rasterise(scene)
-    sites = sites_mod.choose(texels, indirect_spacing(settings, frame_state))
+    every = any(estimators.get(name).every_texel for name in names)
+    sites = sites_mod.choose(texels, 1 if every else indirect_spacing(settings, frame_state))
     at = sites.texels  # where the estimators run
     rasterise_seconds = time.perf_counter() - t0
     # DETP discs reach past a surface's edge by their radius and count what passes there: sun
@@ -355,7 +358,7 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
         rise = own_surface_rise(at, scene, radius, welds)
     clearance_seconds = time.perf_counter() - t0
     context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
-                                 clearance=clearance, rise=rise, extent=extent, frames=frame_state)
+                                 clearance=clearance, rise=rise, extent=extent, frames=frame_state, scene=scene)
     runs, build = {}, {}
     for name in names:
         report(Progress("prepare", 0.5, f"Preparing {name}"))
@@ -658,6 +661,9 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
     denoise = settings.denoise and denoise_mod.available()
     if settings.denoise and not denoise:
         warnings.append("lightmaps not denoised: the pyoidn package is not installed")
+    if not denoise and estimators.get(settings.estimator).for_denoiser:
+        warnings.append(f"estimator '{settings.estimator}' without denoising: its lightmaps keep the photons' "
+                        "noise texel by texel (disc_index gives smoother raw lightmaps)")
     t0 = time.perf_counter()
     for lm in texels.lightmaps:
         pixel = texels.pixel[lm.texels]

@@ -7,8 +7,8 @@ textures, the lights and the world: photons bounce everywhere), on the settings,
 itself (its lightmap UVs and resolution), but not on which other objects are baked with it:
   - photons: a photon's random numbers depend on the seed and its id alone (schedule.py), and
     every surface scatters them whether it is baked or not;
-  - the estimators: a texel sums the segments that cross its own disc (or its k nearest hits) in
-    batch order; disc clearance and rise look at the scene's triangles, not at other texels;
+  - the estimators: a texel sums the segments that cross its own disc (or its k nearest hits, or
+    the photons that land on its own square) in batch order; disc clearance and rise look at the scene's triangles, not at other texels;
   - sampled direct light: a texel's shadow rays are keyed by its object and pixel (direct.py);
   - denoising and dilation work on one lightmap at a time.
 Three things do depend on the others, and are in the key or stop reuse:
@@ -37,7 +37,7 @@ from .scene import Scene, SunLight
 
 # Estimators whose per-texel sums cannot depend on the other texels of the bake (a single-frame
 # hybrid is the disc index; see the module's doc for the sphere cache).
-PER_OBJECT = ("disc_index", "detp", "photon_map", "hybrid")
+PER_OBJECT = ("texel_histogram", "disc_index", "detp", "photon_map", "hybrid")
 
 
 def digest(parts: Iterable) -> str:

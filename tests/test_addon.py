@@ -127,11 +127,11 @@ def _small(scene, out, **extra):
 def test_bake_operator_bakes_applies_and_reports(addon, cornell, bpy, tmp_path):
     _small(cornell, tmp_path)
     assert bpy.ops.detp_bake.bake() == {"FINISHED"}
-    assert (tmp_path / "Floor.disc_index.exr").exists() and (tmp_path / "report.json").exists()
+    assert (tmp_path / "Floor.texel_histogram.exr").exists() and (tmp_path / "report.json").exists()
     mat = cornell.objects["Floor"].material_slots[0].material
     assert "detp_bake lightmap" in mat.node_tree.nodes
     report = json.loads(cornell.detp_bake.last_report)
-    assert report["estimator"] == "disc_index" and report["photons"] == 20_000 and report["objects"] == 7
+    assert report["estimator"] == "texel_histogram" and report["photons"] == 20_000 and report["objects"] == 7
     assert mat.name.startswith("White (Floor")  # White is shared: Floor got its own copy
     assert bpy.ops.detp_bake.revert() == {"FINISHED"}
     mat = cornell.objects["Floor"].material_slots[0].material
@@ -268,7 +268,7 @@ def test_unwrapped_charts_do_not_overlap(addon, empty_blend, bpy, method):
 def test_blender_command_line_handler_bakes_and_compares(addon, cornell, bpy, tmp_path, capsys):
     from detp_bake_addon.operators import cli_command
     code = cli_command.execute(["bake", "--photons", "20000", "--resolution", "16", "--out", str(tmp_path / "b")])
-    assert code == 0 and (tmp_path / "b" / "TallBox.disc_index.exr").exists()
+    assert code == 0 and (tmp_path / "b" / "TallBox.texel_histogram.exr").exists()
     code = cli_command.execute(["compare", "--estimators", "photon_map", "disc_index", "--photons", "20000",
                                 "--resolution", "16", "--out", str(tmp_path / "c")])
     assert code == 0

@@ -9,8 +9,10 @@ from synthetic import grid, make_scene, uv_sphere
 
 # Photon map: k = 2000 gives about 2 % texel noise. DETP family: a disc radius in metres, small
 # enough that its blur over r (proximity bias, ~(r/2R)² on curved surfaces) stays well under 1 %.
-# The brute-force oracle gets fewer texels so it stays quick (it is exact against the others anyway).
-ESTIMATORS = ["photon_map", "detp", "sphere_cache", "disc_index"]
+# The brute-force oracle gets fewer texels so it stays quick (it is exact against the others anyway),
+# and so does the texel histogram, whose noise is that of the photons landing on one texel.
+ESTIMATORS = ["photon_map", "detp", "sphere_cache", "disc_index", "texel_histogram"]
+COARSE = ("detp", "texel_histogram")
 
 
 def _bake(scene, name, photons, radius, bounces=0, seed=0):
@@ -23,7 +25,7 @@ def _bake(scene, name, photons, radius, bounces=0, seed=0):
 def test_point_light_over_a_plane(name):
     """E(ρ) = I·h/(h²+ρ²)^{3/2}, I = P/(4π); value E/π within 3 % over interior texels."""
     h, power = 1.0, 100.0
-    res = 16 if name == "detp" else 32
+    res = 16 if name in COARSE else 32
     sc = make_scene([("Plane", grid(4.0, 4.0, 8), 0.0, True)],
                     [PointLight("Lamp", np.array([0.0, 0.0, h]), np.full(3, power))], resolution=res)
     r = _bake(sc, name, 2_000_000, radius=0.1)
@@ -43,7 +45,7 @@ def test_sun_on_a_plane_is_flat(name):
     s = 3.0
     sc = make_scene([("Plate", grid(2.0, 2.0, 4), 0.0, True)],
                     [SunLight("Sun", np.array([0.0, 0.0, -1.0]), np.full(3, s))],
-                    resolution=16 if name == "detp" else 32)
+                    resolution=16 if name in COARSE else 32)
     r = _bake(sc, name, 1_000_000, radius=0.1)
     x = r.texels.position
     interior = (np.abs(x[:, 0]) < 0.8) & (np.abs(x[:, 1]) < 0.8)
@@ -58,7 +60,7 @@ def test_closed_sphere_indirect_is_uniform_and_exact(name):
     bounces the indirect part is ρΦ/(4πR²)·Σ_{k<B} ρ^k, uniform over the sphere. For DETP this is
     the concave-surface check: landings end short of the tangent plane and must still count."""
     radius, rho, power, bounces = 1.0, 0.5, 100.0, 4
-    res = 24 if name == "detp" else 48
+    res = 24 if name in COARSE else 48
     sc = make_scene([("Sphere", uv_sphere(radius, 24, 48, inward=True), rho, True)],
                     [PointLight("Lamp", np.zeros(3), np.full(3, power))], resolution=res)
     direct = power / (4 * np.pi * radius ** 2)

@@ -79,8 +79,8 @@ def test_quality_benchmark(tmp_path):
     doc = json.loads((tmp_path / "quality.json").read_text())
     res = doc["results"][0]
     methods = {r["method"] for r in res["rows"]}
-    assert {"cycles", "cycles+oidn", "disc_index", "disc_index/no-denoise", "disc_index/photons",
-            "photon_map"} <= methods
+    assert {"cycles", "cycles+oidn", "texel_histogram", "texel_histogram/no-denoise", "disc_index",
+            "disc_index/no-denoise", "disc_index/photons", "photon_map"} <= methods
     assert all(0 < r["rmse_measured"] < 2 and 0 <= r["rmse"] <= r["rmse_measured"] for r in res["rows"])
     assert set(res["reach"]) == methods and all(set(t) == {"5%", "3%"} for t in res["reach"].values())
     assert 0 < res["reference_noise"] < 1

@@ -113,7 +113,7 @@ def test_same_seed_gives_identical_files(cornell, bpy, tmp_path):
     settings = BakeSettings(photons=200_000, seed=7, formats=("exr", "png"))
     bake(sc, settings, tmp_path / "a")
     bake(sc, settings, tmp_path / "b")
-    for name in ("Floor.disc_index.exr", "TallBox.disc_index.exr", "Floor.disc_index.png"):
+    for name in ("Floor.texel_histogram.exr", "TallBox.texel_histogram.exr", "Floor.texel_histogram.png"):
         assert filecmp.cmp(tmp_path / "a" / name, tmp_path / "b" / name, shallow=False)
     other = bake(sc, BakeSettings(photons=200_000, seed=8), tmp_path / "c")
     assert not np.array_equal(other.images["Floor"], compute(sc, settings).images["Floor"])
@@ -124,12 +124,12 @@ def test_apply_then_revert_restores_materials_exactly(cornell, bpy, tmp_path):
     sc = export(bpy, resolution=16)
     result = bake(sc, BakeSettings(photons=50_000), tmp_path)
     scene = bpy.context.scene
-    objs = blender.apply_all(scene, result.files, None, "disc_index")
+    objs = blender.apply_all(scene, result.files, None, "texel_histogram")
     floor = scene.objects["Floor"]
     mat = floor.material_slots[0].material
     frame = mat.node_tree.nodes[blender.FRAME_NAME]
     tex = next(n for n in mat.node_tree.nodes if n.parent == frame and n.type == "TEX_IMAGE")
-    assert tex.image.size[0] == 16 and tex.image.filepath.endswith("Floor.disc_index.exr")
+    assert tex.image.size[0] == 16 and tex.image.filepath.endswith("Floor.texel_histogram.exr")
     active = [n for n in mat.node_tree.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output]
     assert any(n.parent == frame for n in active)
     # "White" is shared by five baked objects: each got its own copy, the original is untouched.

@@ -112,7 +112,7 @@ def test_missing_default_uv_layer_is_created_and_said(capsys, tmp_path, empty_bl
                                    "--out", str(tmp_path / "out")])
     assert code == 0, err
     assert "created UV layer 'Lightmap'" in err and "Floor" in err
-    assert (tmp_path / "out" / "Floor.disc_index.exr").exists()
+    assert (tmp_path / "out" / "Floor.texel_histogram.exr").exists()
 
 
 def test_names_that_collide_as_file_names_get_distinct_files(tmp_path):

@@ -123,7 +123,7 @@ def test_the_cli_through_a_scheduler_writes_the_same_files(cluster, tmp_path, bp
             "--no-denoise"]
     assert main(args + ["--out", str(tmp_path / "here")]) == 0
     assert main(args + ["--out", str(tmp_path / "far"), "--scheduler", cluster.address]) == 0
-    for name in ("Floor.disc_index.exr", "TallBox.disc_index.exr"):
+    for name in ("Floor.texel_histogram.exr", "TallBox.texel_histogram.exr"):
         assert (tmp_path / "here" / name).read_bytes() == (tmp_path / "far" / name).read_bytes()
     report = json.loads((tmp_path / "far" / "report.json").read_text())
     assert report["cluster"]["workers"] == 2 and report["cluster"]["address"] == cluster.address
@@ -255,7 +255,7 @@ def test_a_scheduler_and_workers_of_their_own_survive_a_killed_worker(tmp_path, 
         rest, more = far.communicate(timeout=300)
         assert far.returncode == 0, "".join(err) + more
         assert procs[1].wait(timeout=10) == -signal.SIGKILL
-        for name in ("Floor.disc_index.exr", "TallBox.disc_index.exr"):
+        for name in ("Floor.texel_histogram.exr", "TallBox.texel_histogram.exr"):
             assert (tmp_path / "here" / name).read_bytes() == (tmp_path / "far" / name).read_bytes()
         report = json.loads((tmp_path / "far" / "report.json").read_text())
         assert report["cluster"]["address"] == address and report["cluster"]["resubmitted"] >= 1, report["cluster"]

@@ -19,7 +19,7 @@ def test_a_bake_of_more_objects_reuses_the_others(tmp_path, capsys, bpy):
     assert main(["bake", str(QUASI_STATIC), "--objects", "Floor", "Table", "--out", str(out), *FAST]) == 0
     assert "reused" not in capsys.readouterr().err
     before = files(out)
-    assert sorted(before) == ["Floor.disc_index.exr", "Table.disc_index.exr"]
+    assert sorted(before) == ["Floor.texel_histogram.exr", "Table.texel_histogram.exr"]
 
     code = main(["bake", str(QUASI_STATIC), "--objects", "Floor", "Table", "Mover", "--out", str(out), "--json", *FAST])
     captured = capsys.readouterr()

@@ -34,7 +34,8 @@ def test_reported_noise_matches_the_real_error(name):
 
 def test_target_noise_stops_below_the_target_and_unbiased():
     sc, exact = _sphere()
-    settings = BakeSettings(photons=20_000_000, bounces=BOUNCES, batch_size=50_000, target_noise=2.0,
+    settings = BakeSettings(estimator="disc_index", photons=20_000_000, bounces=BOUNCES, batch_size=50_000,
+                            target_noise=2.0,
                             estimator_settings=EstimatorSettings(radius=0.08))
     r = compute(sc, settings)
     assert r.stopped_by == "target_noise"
@@ -47,7 +48,8 @@ def test_target_noise_stops_below_the_target_and_unbiased():
 
 def test_time_limit_stops_after_the_first_batch_when_already_spent():
     sc, exact = _sphere()
-    r = compute(sc, BakeSettings(photons=5_000_000, bounces=BOUNCES, batch_size=100_000, time_limit=1e-6,
+    r = compute(sc, BakeSettings(estimator="disc_index", photons=5_000_000, bounces=BOUNCES, batch_size=100_000,
+                                 time_limit=1e-6,
                                  estimator_settings=EstimatorSettings(radius=0.08)))
     assert r.stopped_by == "time_limit" and r.stats.photons == 100_000
     assert abs(np.mean(r.value[:, 0]) / exact - 1) < 0.02

@@ -47,7 +47,7 @@ def _wait_for(proc, text, seconds=120.0):
 
 def _older_bake(out):
     out.mkdir()
-    (out / "Floor.disc_index.exr").write_bytes(b"an older bake")
+    (out / "Floor.texel_histogram.exr").write_bytes(b"an older bake")
     (out / "notes.txt").write_text("the user's")
     return _files(out)
 
@@ -96,10 +96,10 @@ def test_a_full_disk_leaves_no_partial_file(tmp_path, empty_blend, bpy):
     finally:
         resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
         signal.signal(signal.SIGXFSZ, previous)
-    assert "Floor.disc_index" in str(err.value)  # the image being written when the disk filled
+    assert "Floor.texel_histogram" in str(err.value)  # the image being written when the disk filled
     assert _files(out) == before
     bake.write(result, out)  # with room again, the same result writes
-    assert (out / "Floor.disc_index.exr").stat().st_size > 2048 and (out / "notes.txt").exists()
+    assert (out / "Floor.texel_histogram.exr").stat().st_size > 2048 and (out / "notes.txt").exists()
 
 
 def test_signal_handlers_are_restored_and_an_in_process_cancel_says_so(tmp_path, capsys):
@@ -164,21 +164,21 @@ def test_stdout_holds_only_the_files_written_and_warnings_say_what_will_not_last
     assert main([*common, "--format", "exr,png"]) == 0
     first = capfd.readouterr()
     lines = first.out.splitlines()
-    assert lines == [str(out / n) for n in ("Floor.disc_index.exr", "Floor.disc_index.png", "Wall.disc_index.exr",
-                                           "Wall.disc_index.png", "report.json")]
+    assert lines == [str(out / n) for n in ("Floor.texel_histogram.exr", "Floor.texel_histogram.png", "Wall.texel_histogram.exr",
+                                           "Wall.texel_histogram.png", "report.json")]
     assert "Read blend" in first.err and "Read blend" not in first.out
     assert "warning: UV layer 'Lightmap' created on Floor, Wall is not stored anywhere (no --save)" in first.err
-    png = (out / "Floor.disc_index.png").read_bytes()
+    png = (out / "Floor.texel_histogram.png").read_bytes()
     (out / "notes.txt").write_text("the user's")
 
     assert main([*common, "--format", "exr", "--apply"]) == 0
     second = capfd.readouterr()
-    assert second.out.splitlines() == [str(out / n) for n in ("Floor.disc_index.exr", "Wall.disc_index.exr",
+    assert second.out.splitlines() == [str(out / n) for n in ("Floor.texel_histogram.exr", "Wall.texel_histogram.exr",
                                                               "report.json")]
     assert "warning: --apply without --save" in second.err and "nothing lasting happens" in second.err
     stale = [line for line in second.err.splitlines() if "older bake" in line]
-    assert len(stale) == 1 and "Floor.disc_index.png, Wall.disc_index.png" in stale[0]
-    assert (out / "Floor.disc_index.png").read_bytes() == png and (out / "notes.txt").exists()
+    assert len(stale) == 1 and "Floor.texel_histogram.png, Wall.texel_histogram.png" in stale[0]
+    assert (out / "Floor.texel_histogram.png").read_bytes() == png and (out / "notes.txt").exists()
     report = json.loads((out / "report.json").read_text())
     assert report["settings"]["formats"] == ["exr"] and any("older bake" in w for w in report["warnings"])
 
@@ -240,8 +240,8 @@ def test_overlapping_and_out_of_range_uvs_huge_discs_and_a_large_k_are_warned(tm
     path = tmp_path / "uvs.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     out = tmp_path / "out"
-    code = main(["bake", str(path), "--photons", "20000", "--resolution", "16", "--radius-texels", "1000",
-                 "--out", str(out)])
+    code = main(["bake", str(path), "--photons", "20000", "--resolution", "16", "--estimator", "disc_index",
+                 "--radius-texels", "1000", "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 0, err
     warnings = [line for line in err.splitlines() if "warning:" in line]

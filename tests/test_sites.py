@@ -1,5 +1,7 @@
 """Sites (indirect light estimated on every second texel): blending is exact for linear light, never
 crosses to another surface, and the default bake keeps Cycles' numbers."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -100,8 +102,8 @@ def _box_room(res):
 
 def test_spacing_two_keeps_the_mean_of_every_texel_estimate():
     sc = _box_room(32)
-    every = compute(sc, BakeSettings(photons=400_000, indirect_spacing=1, denoise=False))
-    two = compute(sc, BakeSettings(photons=400_000, indirect_spacing=2, denoise=False))
+    every = compute(sc, BakeSettings(estimator="disc_index", photons=400_000, indirect_spacing=1, denoise=False))
+    two = compute(sc, BakeSettings(estimator="disc_index", photons=400_000, indirect_spacing=2, denoise=False))
     assert every.direct["indirect_spacing"] == 1 and two.direct["indirect_spacing"] == 2
     assert two.direct["indirect_sites"] < 0.6 * every.direct["indirect_sites"]
     for name in every.images:
@@ -121,8 +123,11 @@ def test_automatic_spacing_goes_by_each_lightmaps_size():
     on_floor = s.index < floor.count
     assert on_floor.sum() < 0.5 * floor.count  # sites on the floor only
     assert (~on_floor).sum() == len(tx) - floor.count
-    assert compute(sc, BakeSettings(photons=2000, denoise=False)).direct["indirect_spacing"] == 2
-    assert compute(sc, BakeSettings(photons=2000, denoise=False, direct="photons")).direct["indirect_spacing"] == 1
+    quick = BakeSettings(estimator="disc_index", photons=2000, denoise=False)
+    assert compute(sc, quick).direct["indirect_spacing"] == 2
+    assert compute(sc, replace(quick, direct="photons")).direct["indirect_spacing"] == 1
+    # The texel histogram costs nothing per texel: it always estimates every texel.
+    assert compute(sc, replace(quick, estimator="texel_histogram")).direct["indirect_spacing"] == 1
 
 
 def test_spacing_is_validated():

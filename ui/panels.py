@@ -4,6 +4,8 @@ import json
 
 import bpy
 
+from ..detp_bake import estimators
+
 
 class _Panel:
     bl_space_type = "VIEW_3D"
@@ -82,6 +84,11 @@ class DETPBAKE_PT_estimator(_Panel, bpy.types.Panel):
         s = context.scene.detp_bake
         if s.estimator == "photon_map":
             layout.prop(s, "k")
+            return
+        if not estimators.get(s.estimator).discs:
+            layout.label(text="No setting: each photon counts in the texel it lands in")
+            if not s.denoise:
+                layout.label(text="Meant to be denoised: turn Denoise on", icon="ERROR")
             return
         layout.prop(s, "radius_mode")
         layout.prop(s, "radius_texels" if s.radius_mode == "TEXELS" else "radius")

@@ -51,6 +51,7 @@ class Context:
     rise: Optional[np.ndarray] = None  # per texel, its own surface's height in front of its disc (rise.py)
     extent: Optional[np.ndarray] = None  # per texel, the size of its own piece of surface (rise.piece_extent)
     frames: Optional["FrameState"] = None  # set when baking a frame range (frames.py)
+    scene: Optional[object] = None  # the (recentred) Scene, for estimators that read its triangles
 
 
 @dataclass
@@ -84,6 +85,8 @@ class Estimator:
     description = ""
     streaming = False  # True when `add` consumes a batch completely
     discs = False  # DETP family: tangent discs, which need their radii, tangent clearance and a sun margin
+    every_texel = False  # estimates every texel at no cost per texel: the bake gives it no sites (sites.py)
+    for_denoiser = False  # its noise is white, texel by texel: made to be denoised (the bake warns without)
     stores_hits = False  # keeps every surface hit until `finish` (memory grows with the photons)
     baseline = False  # Compare puts it first: the others are measured against it
     compared = True  # in Compare's default set
@@ -170,4 +173,4 @@ def create(name: str, texels: TexelSet, settings: EstimatorSettings,
 
 def _load_all() -> None:
     # They register themselves, in this order (the order of names()).
-    from . import disc_index, sphere_cache, hybrid, detp, photon_map  # noqa: F401
+    from . import disc_index, sphere_cache, hybrid, detp, photon_map, texel_histogram  # noqa: F401

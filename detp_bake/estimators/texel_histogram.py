@@ -1,0 +1,148 @@
+"""Texel histogram: each photon adds its flux to the one texel it lands in.
+
+E(texel) = Σ Φ_p / A over the photons that land on the texel's own square of surface from the front,
+A being the world area of surface inside that square (texels.py measures it exactly). That is the
+mean irradiance over the square, which is what Cycles' bake averages too (it jitters its sample
+points over the texel), so there is no blur beyond the texel and no darkening in concave corners.
+
+It costs one lookup per landing and nothing per texel, where a DETP disc of r texels is crossed by
+some πr² times as many segments and each must be found in an index. Its noise is the price: about
+1/√(photons landing on the texel), and independent from texel to texel. That white noise is what
+OIDN is trained to remove (DESIGN.md §7: noise correlated over a disc passes through it), so this
+estimator is meant to be denoised: it is the indirect part of a bake whose direct light comes from
+shadow rays. With `--direct photons` or without denoising it is the noisiest of the estimators.
+"""
+from __future__ import annotations
+
+import time
+
+import numba
+import numpy as np
+
+from ..textures import opacity_at, surfaces
+from . import Estimate, Estimator, register
+
+
+@numba.njit(cache=True)
+def _splat(pos, direction, flux, tri, positions, normals, uvs, lm_of_tri, width, base, texel_of, inv_area,
+           cutout, opacity, opacity_tex, tex_uvs, pixels, info, acc):
+    """Add each landing's flux over its texel's area to the texel; returns how many landings were
+    counted. A photon lands on a cut-out surface with the probability of its opacity α (and passes
+    through otherwise: scattering.py), so there a landing counts 1/α times: every arrival, on
+    average. One thread, in landing order: the sums are the same on any machine."""
+    counted = 0
+    for h in range(tri.shape[0]):
+        t = tri[h]
+        m = lm_of_tri[t]
+        if m < 0:
+            continue
+        # Barycentrics of the landing point in its triangle (3D, float64).
+        ax, ay, az = positions[t, 0, 0], positions[t, 0, 1], positions[t, 0, 2]
+        e1x, e1y, e1z = positions[t, 1, 0] - ax, positions[t, 1, 1] - ay, positions[t, 1, 2] - az
+        e2x, e2y, e2z = positions[t, 2, 0] - ax, positions[t, 2, 1] - ay, positions[t, 2, 2] - az
+        px, py, pz = pos[h, 0] - ax, pos[h, 1] - ay, pos[h, 2] - az
+        d11 = e1x * e1x + e1y * e1y + e1z * e1z
+        d12 = e1x * e2x + e1y * e2y + e1z * e2z
+        d22 = e2x * e2x + e2y * e2y + e2z * e2z
+        p1 = px * e1x + py * e1y + pz * e1z
+        p2 = px * e2x + py * e2y + pz * e2z
+        det = d11 * d22 - d12 * d12
+        if det <= 0.0:
+            continue
+        b1 = (d22 * p1 - d12 * p2) / det
+        b2 = (d11 * p2 - d12 * p1) / det
+        b1 = min(max(b1, 0.0), 1.0)
+        b2 = min(max(b2, 0.0), 1.0 - b1)
+        b0 = 1.0 - b1 - b2
+        # From the front of the surface the texel faces (its interpolated shading normal).
+        nx = b0 * normals[t, 0, 0] + b1 * normals[t, 1, 0] + b2 * normals[t, 2, 0]
+        ny = b0 * normals[t, 0, 1] + b1 * normals[t, 1, 1] + b2 * normals[t, 2, 1]
+        nz = b0 * normals[t, 0, 2] + b1 * normals[t, 1, 2] + b2 * normals[t, 2, 2]
+        if nx * direction[h, 0] + ny * direction[h, 1] + nz * direction[h, 2] >= 0.0:
+            continue
+        w = width[m]
+        u = (b0 * uvs[t, 0, 0] + b1 * uvs[t, 1, 0] + b2 * uvs[t, 2, 0]) * w
+        v = (b0 * uvs[t, 0, 1] + b1 * uvs[t, 1, 1] + b2 * uvs[t, 2, 1]) * w
+        i = min(max(int(np.floor(u)), 0), w - 1)
+        j = min(max(int(np.floor(v)), 0), w - 1)
+        k = texel_of[base[m] + j * w + i]
+        if k < 0:
+            continue
+        a = inv_area[k]
+        if cutout:
+            alpha = opacity_at(opacity, opacity_tex, tex_uvs, pixels, info, t, b1, b2)
+            if alpha <= 0.0:
+                continue
+            a /= alpha
+        acc[k, 0] += flux[h, 0] * a
+        acc[k, 1] += flux[h, 1] * a
+        acc[k, 2] += flux[h, 2] * a
+        counted += 1
+    return counted
+
+
+@register
+class TexelHistogram(Estimator):
+    name = "texel_histogram"
+    bytes_per_texel = 56  # sums (24), the pixel table (4 per pixel of the lightmaps), the result (24)
+    label = "Texel Histogram"
+    description = "Each photon's flux into the texel it lands in: no blur, white noise (for OIDN)"
+    streaming = True
+    every_texel = True  # its estimate costs nothing per texel: no sites between which to blend
+    for_denoiser = True
+
+    def __init__(self, texels, settings, progress=None, context=None):
+        super().__init__(texels, settings, progress, context)
+        self.scene = context.scene if context is not None and context.scene is not None else None
+        if self.scene is None:
+            raise ValueError("texel_histogram needs the scene's triangles (Context.scene)")
+        sc = self.scene
+        lm_of_tri = np.full(sc.triangle_count, -1, np.int32)
+        width = np.zeros(len(texels.lightmaps), np.int64)
+        base = np.zeros(len(texels.lightmaps), np.int64)
+        total = 0
+        for m, lm in enumerate(texels.lightmaps):
+            if lm.width != lm.height:
+                raise ValueError("texel_histogram needs square lightmaps")
+            lm_of_tri[sc.objects[lm.object_index].triangles] = m
+            width[m], base[m] = lm.width, total
+            total += lm.width * lm.height
+        texel_of = np.full(total, -1, np.int32)
+        for m, lm in enumerate(texels.lightmaps):
+            texel_of[base[m] + texels.pixel[lm.texels]] = np.arange(lm.offset, lm.offset + lm.count, dtype=np.int32)
+        self._tables = (np.ascontiguousarray(sc.positions, np.float64), np.ascontiguousarray(sc.normals, np.float64),
+                        np.ascontiguousarray(sc.uvs, np.float64), lm_of_tri, width, base, texel_of,
+                        1.0 / np.maximum(texels.area.astype(np.float64), 1e-30))
+        srf = surfaces(sc)
+        self._surfaces = (srf.cutout, srf.opacity, srf.opacity_tex, srf.tex_uvs, srf.pixels, srf.info)
+        self.acc = np.zeros((len(texels), 3))
+        self.landings = self.counted = 0
+        self.seconds = 0.0
+
+    def add(self, batch):
+        t0 = time.perf_counter()
+        self.counted += _splat(batch.hit_position, batch.hit_dir, batch.hit_flux, batch.hit_triangle, *self._tables,
+                               *self._surfaces, self.acc)
+        self.landings += batch.hit_count
+        self.seconds += time.perf_counter() - t0
+
+    def take(self):
+        sums = {"irradiance": self.acc.copy(), "landings": self.landings, "counted": self.counted,
+                "seconds_query": self.seconds}
+        self.acc[:] = 0.0
+        self.landings = self.counted = 0
+        self.seconds = 0.0
+        return sums
+
+    def absorb(self, sums):
+        self.acc += sums["irradiance"]
+        self.landings += sums["landings"]
+        self.counted += sums["counted"]
+        self.seconds += sums["seconds_query"]
+
+    def reset(self) -> None:
+        self.take()
+
+    def finish(self):
+        return Estimate(self.acc.copy(), {"landings": self.landings, "counted": self.counted,
+                                                  "seconds_query": self.seconds})
