@@ -23,15 +23,15 @@ from ..textures import opacity_at, surfaces
 from . import Estimate, Estimator, register
 
 
-@numba.njit(cache=True)
-def _splat(pos, direction, flux, tri, positions, normals, uvs, lm_of_tri, width, base, texel_of, inv_area,
-           cutout, opacity, opacity_tex, tex_uvs, pixels, info, acc):
-    """Add each landing's flux over its texel's area to the texel; returns how many landings were
-    counted. A photon lands on a cut-out surface with the probability of its opacity α (and passes
-    through otherwise: scattering.py), so there a landing counts 1/α times: every arrival, on
-    average. One thread, in landing order: the sums are the same on any machine."""
-    counted = 0
-    for h in range(tri.shape[0]):
+@numba.njit(cache=True, parallel=True)
+def _landing_texels(pos, direction, tri, positions, normals, uvs, lm_of_tri, width, base, texel_of, inv_area,
+                    cutout, opacity, opacity_tex, tex_uvs, pixels, info, texel, weight):
+    """Per landing, its texel (−1: none of ours, or from behind) and the weight of its flux: one over
+    the texel's area, and on a cut-out surface one over its opacity α too. A photon lands there with
+    probability α and passes through otherwise (scattering.py), so a landing counts 1/α times and
+    stands for every arrival, on average."""
+    for h in numba.prange(tri.shape[0]):
+        texel[h] = -1
         t = tri[h]
         m = lm_of_tri[t]
         if m < 0:
@@ -74,10 +74,22 @@ def _splat(pos, direction, flux, tri, positions, normals, uvs, lm_of_tri, width,
             if alpha <= 0.0:
                 continue
             a /= alpha
-        acc[k, 0] += flux[h, 0] * a
-        acc[k, 1] += flux[h, 1] * a
-        acc[k, 2] += flux[h, 2] * a
-        counted += 1
+        texel[h] = k
+        weight[h] = a
+
+
+@numba.njit(cache=True)
+def _add(texel, weight, flux, acc):
+    """The sums, in landing order on one thread: the same on any machine. Returns how many counted."""
+    counted = 0
+    for h in range(texel.shape[0]):
+        k = texel[h]
+        if k >= 0:
+            a = weight[h]
+            acc[k, 0] += flux[h, 0] * a
+            acc[k, 1] += flux[h, 1] * a
+            acc[k, 2] += flux[h, 2] * a
+            counted += 1
     return counted
 
 
@@ -121,8 +133,11 @@ class TexelHistogram(Estimator):
 
     def add(self, batch):
         t0 = time.perf_counter()
-        self.counted += _splat(batch.hit_position, batch.hit_dir, batch.hit_flux, batch.hit_triangle, *self._tables,
-                               *self._surfaces, self.acc)
+        n = batch.hit_count
+        texel, weight = np.empty(n, np.int32), np.empty(n)
+        _landing_texels(batch.hit_position, batch.hit_dir, batch.hit_triangle, *self._tables, *self._surfaces, texel,
+                        weight)
+        self.counted += _add(texel, weight, batch.hit_flux, self.acc)
         self.landings += batch.hit_count
         self.seconds += time.perf_counter() - t0
 
