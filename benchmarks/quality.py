@@ -103,7 +103,8 @@ def label(method: str) -> str:
     if method in LABELS:
         return LABELS[method]
     name, _, variant = method.partition("/")
-    return {"": f"`{name}`: shadow rays + estimator + OIDN (default)",
+    default = " (default)" if name == BakeSettings.estimator else ""
+    return {"": f"`{name}`: shadow rays + estimator + OIDN{default}",
             "no-denoise": f"`{name}`: shadow rays + estimator, no denoise",
             "photons": f"`{name}`: photons only (paper's mode), raw"}[variant]
 

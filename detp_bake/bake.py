@@ -442,8 +442,12 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
         seconds = {"rasterise": rasterise_seconds, "direct": direct_info.get("seconds", 0.0),
                    "clearance": clearance_seconds, "build": build[name], "trace": tracer.stats.seconds,
                    "estimate": spent[name]}
+        # An estimate with white noise is denoised apart from the direct light (denoise.py).
+        apart = None if direct_e is None or not runs[name].for_denoiser else (direct_e / np.pi).astype(np.float32)
         result = _finish(replace(settings, estimator=name), bounces, texels, value, out.counters, tracer, seconds,
-                         direct_info)
+                         direct_info, apart)
+        result.direct["denoised_apart"] = apart is not None and bool(result.raw_images)
+        apart = None
         out = value = None
         result.stopped_by = stopped_by
         result.share = share
@@ -654,8 +658,10 @@ def _value(est, direct_e, share) -> np.ndarray:
     return total.astype(np.float32)
 
 
-def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_info=None) -> BakeResult:
-    """The per-texel E/π `value` as dilated (and denoised) images."""
+def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_info=None,
+            direct=None) -> BakeResult:
+    """The per-texel E/π `value` as dilated (and denoised) images. `direct`: the direct part of
+    `value`, to be denoised on its own and the rest (the indirect estimate) on its own."""
     result_images, raw_images, masks, centre_masks = {}, {}, {}, {}
     warnings = []
     denoise = settings.denoise and denoise_mod.available()
@@ -672,8 +678,15 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
         if denoise:
             raw_images[lm.name] = raw
             area, _ = texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)
-            result_images[lm.name] = denoise_mod.denoise_lightmap(img, mask, margin=settings.margin,
-                                                                  weights=area[..., 0])
+            if direct is None:
+                result_images[lm.name] = denoise_mod.denoise_lightmap(img, mask, margin=settings.margin,
+                                                                      weights=area[..., 0])
+            else:
+                first, _ = texels_mod.to_image(direct[lm.texels], lm, pixel)
+                rest = np.maximum(img - first, 0.0)
+                result_images[lm.name] = sum(denoise_mod.denoise_lightmap(part, mask, margin=settings.margin,
+                                                                          weights=area[..., 0])
+                                             for part in (first, rest))
         else:
             result_images[lm.name] = raw
         masks[lm.name] = mask

@@ -60,6 +60,24 @@ def _mean_error(a, raw, mask):
 UP = np.broadcast_to(np.array([0, 0, 1], np.float32), (128, 128, 3))
 
 
+def test_white_noise_over_sharp_direct_light_is_denoised_best_apart():
+    """Sharp direct light (a checkerboard of lit and shadowed squares, noiseless) plus a smooth
+    indirect part with 20 % white noise: OIDN keeps the noise near every edge of the sum, and
+    smooths the indirect part alone far better (the bake denoises a texel histogram's bake so)."""
+    n = 128
+    mask = _charts(n)
+    j, i = np.mgrid[0:n, 0:n]
+    lit = ((i // 16 + j // 16) % 2 == 0) & mask
+    direct = (np.where(lit, 1.0, 0.05)[..., None] * np.ones(3) * mask[..., None]).astype(np.float32)
+    indirect = 0.3 * _point_light(n)
+    noisy = _noisy(indirect, mask, np.random.default_rng(0), level=0.2)
+    truth = direct + indirect
+    together = _rel_rmse(denoise.denoise_lightmap(direct + noisy, mask, margin=0), truth, mask)
+    apart = _rel_rmse(denoise.denoise_lightmap(direct, mask, margin=0)
+                      + denoise.denoise_lightmap(noisy, mask, margin=0), truth, mask)
+    assert apart < 0.7 * together, (apart, together)  # measured 2.4 % against 4.1 %
+
+
 @pytest.mark.parametrize("kwargs", [{}, {"filter": "RT"}, {"normal": UP}],
                          ids=["RTLightmap", "RT", "RT+normal"])
 def test_white_noise_is_cut_several_times_and_the_chart_mean_kept(kwargs):

@@ -90,3 +90,18 @@ def test_cut_out_surfaces_count_every_arrival():
     assert r.counters["counted"] < 0.6 * 400_000 * np.arcsin(0.5) * 4 / (4 * np.pi)  # half of them passed
     # Without OIDN its white noise stays: the bake says so.
     assert any("without denoising" in w for w in r.warnings)
+
+
+def test_a_default_bake_denoises_its_direct_and_indirect_parts_apart_and_keeps_the_energy():
+    from detp_bake.bake import BakeSettings, compute
+    sc = make_scene([("Floor", grid(SIZE, SIZE, 4), 0.8, True),
+                     ("Ceiling", grid(SIZE, SIZE, 4, z=1.0, flip=True), 0.8, True)],
+                    [PointLight("Lamp", np.array([0.3, -0.2, 0.5]), np.full(3, 20.0))], resolution=16, bounces=2)
+    r = compute(sc, BakeSettings(photons=100_000))
+    assert r.settings.estimator == "texel_histogram" and r.direct["denoised_apart"]
+    for name, img in r.images.items():
+        m = r.masks[name]
+        raw = r.raw_images[name][m].mean(axis=0, dtype=np.float64)
+        assert np.allclose(img[m].mean(axis=0, dtype=np.float64), raw, rtol=0.005), name
+        assert np.std(img[m][:, 0]) < np.std(r.raw_images[name][m][:, 0])  # and it did smooth
+    assert not compute(sc, BakeSettings(photons=20_000, estimator="disc_index")).direct["denoised_apart"]
