@@ -54,7 +54,7 @@ env: $(VENV45)/.installed
 
 demo: $(VENV45)/.installed
 	NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-4.5-$(CORE_HASH) $(VENV45)/bin/python -m detp_bake bake sample_scenes/cornell_box.blend \
-		--estimator disc_index --photons 2000000 --resolution 128 --out $(DEMO_OUT) --format exr,png \
+		--photons 4000000 --resolution 128 --out $(DEMO_OUT) --format exr,png \
 		--apply --save $(DEMO_OUT)/cornell_box_baked.blend
 
 test-4.5: $(VENV45)/.installed

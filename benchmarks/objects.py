@@ -12,7 +12,7 @@ For each scene every mesh is baked at `--resolution`² per object:
   gives Cycles' own noise. Cached under OUT/cache, keyed by the .blend's bytes, the settings and
   the Blender version (Cycles 4.5 and 5.x do not bake the same numbers everywhere).
 - ours with the default settings (`direct="sampled"`: shadow rays, the estimator on indirect light,
-  OIDN) and in the paper's mode (`direct="photons"`), each with the scene's bounces and with
+  OIDN) and in the paper's mode (`direct="photons"`, with `disc_index`), each with the scene's bounces and with
   bounces = 0. Each is baked as two halves of `--photons` (`--paper-photons` in the paper's mode)
   / 2 with seeds 1 and 2: their mean is the result, their difference the noise of its per-object
   mean. The crowns and the branches are small: most indirect photons land elsewhere, and 16M
@@ -55,6 +55,7 @@ CONFIGS = {
     "quick": dict(resolution=16, photons=40_000, paper_photons=40_000, spp=8, direct_spp=4),
 }
 MODES = ("sampled", "photons")  # ours: the default (shadow rays + estimator) and the paper's mode
+ESTIMATORS = {"sampled": BakeSettings.estimator, "photons": "disc_index"}  # the paper's mode is DETP's
 SEEDS = (1, 2)
 
 
@@ -95,7 +96,8 @@ def ours(scene, mode, bounces, photons, resolution, log):
         # With shadow rays and no bounce the photons carry nothing: trace as few as allowed.
         n = 1 if (mode == "sampled" and bounces == 0) else max(1, photons // len(SEEDS))
         t0 = time.perf_counter()
-        r = compute(scene, BakeSettings(photons=n, resolution=resolution, direct=mode, bounces=bounces, seed=seed))
+        r = compute(scene, BakeSettings(photons=n, resolution=resolution, direct=mode, bounces=bounces, seed=seed,
+                                        estimator=ESTIMATORS[mode]))
         seconds += time.perf_counter() - t0
         halves.append(r.images)
         masks = r.centre_masks

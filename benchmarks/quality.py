@@ -81,7 +81,9 @@ CONFIGS = {
                   old_mode=["disc_index"], old_mode_max=4_000_000, sweep_photons=[250_000, 1_000_000, 4_000_000],
                   radius_texels=[1.0, 1.5, 2.0, 3.0, 4.0], direct_samples=[4, 8, 16, 32],
                   scene_resolution={}, scene_reference_spp={"window_room": 4096},
-                  scene_spp={"window_room": [2, 4, 8, 16, 32, 64, 128, 256, 512]}),
+                  scene_spp={"window_room": [2, 4, 8, 16, 32, 64, 128, 256, 512]},
+                  scene_photons={"window_room": [62_500, 125_000, 250_000, 500_000, 1_000_000, 2_000_000,
+                                                 4_000_000, 8_000_000, 16_000_000]}),
     "full": dict(resolution=128, reference_spp=4096, spp=[2, 4, 8, 16, 32, 64, 128, 256, 512, 1024],
                  photons=[250_000, 500_000, 1_000_000, 2_000_000, 4_000_000, 8_000_000, 16_000_000],
                  estimators=["texel_histogram", "disc_index", "sphere_cache", "photon_map"],
@@ -230,11 +232,12 @@ def denoise_all(images, masks, filter_):
 
 
 def for_scene(cfg, label_):
-    """The configuration with this scene's resolution (`res`), reference samples (`ref_spp`) and
-    Cycles ladder (`spp`)."""
+    """The configuration with this scene's resolution (`res`), reference samples (`ref_spp`),
+    Cycles ladder (`spp`) and photon ladder (`photons`)."""
     return dict(cfg, res=cfg["scene_resolution"].get(label_, cfg["resolution"]),
                 ref_spp=cfg["scene_reference_spp"].get(label_, cfg["reference_spp"]),
-                spp=cfg["scene_spp"].get(label_, cfg["spp"]))
+                spp=cfg["scene_spp"].get(label_, cfg["spp"]),
+                photons=cfg.get("scene_photons", {}).get(label_, cfg["photons"]))
 
 
 def ours_settings(cfg, name, **kw):

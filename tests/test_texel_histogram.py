@@ -105,3 +105,19 @@ def test_a_default_bake_denoises_its_direct_and_indirect_parts_apart_and_keeps_t
         assert np.allclose(img[m].mean(axis=0, dtype=np.float64), raw, rtol=0.005), name
         assert np.std(img[m][:, 0]) < np.std(r.raw_images[name][m][:, 0])  # and it did smooth
     assert not compute(sc, BakeSettings(photons=20_000, estimator="disc_index")).direct["denoised_apart"]
+
+
+def test_smooth_shading_counts_by_the_shading_normal_as_cycles_does():
+    """A flat plate whose shading normals lean 30° from its face, under a sun straight down: Cycles
+    takes the cosine to the shading normal, E = S·cos 30°, though S W/m² land on the face."""
+    from detp_bake.bake import BakeSettings, compute
+    from detp_bake.scene import SunLight
+    s, lean = 3.0, np.radians(30.0)
+    pos, nrm, uv = grid(SIZE, SIZE, 4)
+    nrm[:] = [0.0, np.sin(lean), np.cos(lean)]
+    sc = make_scene([("Plate", (pos, nrm, uv), 0.0, True)],
+                    [SunLight("Sun", np.array([0.0, 0.0, -1.0]), np.full(3, s))], resolution=RES)
+    r = compute(sc, BakeSettings(estimator="texel_histogram", photons=400_000, bounces=0, direct="photons",
+                                 denoise=False))
+    mean = np.sum(r.value[:, 0] * r.texels.area) / r.texels.area.sum() * np.pi
+    assert abs(mean / (s * np.cos(lean)) - 1.0) < 0.01, mean
