@@ -173,4 +173,4 @@ def create(name: str, texels: TexelSet, settings: EstimatorSettings,
 
 def _load_all() -> None:
     # They register themselves, in this order (the order of names()).
-    from . import disc_index, sphere_cache, hybrid, detp, photon_map, texel_histogram  # noqa: F401
+    from . import texel_histogram, disc_index, sphere_cache, hybrid, detp, photon_map  # noqa: F401
