@@ -20,7 +20,7 @@ def _sphere():
     return sc, exact
 
 
-@pytest.mark.parametrize("name", ["disc_index", "sphere_cache"])
+@pytest.mark.parametrize("name", ["disc_index", "sphere_cache", "texel_histogram"])
 def test_reported_noise_matches_the_real_error(name):
     """In a closed sphere (uniform irradiance, exact direct light) the texels' RMS error against the
     closed form is the noise: the batch-spread estimate must agree with it within 25 %."""
