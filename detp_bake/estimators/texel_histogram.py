@@ -45,7 +45,7 @@ def _landing_texels(pos, direction, tri, positions, normals, uvs, lm_of_tri, wid
         if m < 0:
             continue
         # Barycentrics of the landing point in its triangle (3D, float64).
-        ax, ay, az = positions[t, 0, 0], positions[t, 0, 1], positions[t, 0, 2]
+        ax, ay, az = np.float64(positions[t, 0, 0]), np.float64(positions[t, 0, 1]), np.float64(positions[t, 0, 2])
         e1x, e1y, e1z = positions[t, 1, 0] - ax, positions[t, 1, 1] - ay, positions[t, 1, 2] - az
         e2x, e2y, e2z = positions[t, 2, 0] - ax, positions[t, 2, 1] - ay, positions[t, 2, 2] - az
         px, py, pz = pos[h, 0] - ax, pos[h, 1] - ay, pos[h, 2] - az
@@ -143,8 +143,9 @@ class TexelHistogram(Estimator):
         texel_of = np.full(total, -1, np.int32)
         for m, lm in enumerate(texels.lightmaps):
             texel_of[base[m] + texels.pixel[lm.texels]] = np.arange(lm.offset, lm.offset + lm.count, dtype=np.int32)
-        self._tables = (np.ascontiguousarray(sc.positions, np.float64), np.ascontiguousarray(sc.normals, np.float64),
-                        np.ascontiguousarray(sc.uvs, np.float64), lm_of_tri, width, base, texel_of,
+        # The scene's own arrays, not copies (the bake's are float64 positions, float32 normals and UVs).
+        self._tables = (np.ascontiguousarray(sc.positions), np.ascontiguousarray(sc.normals),
+                        np.ascontiguousarray(sc.uvs), lm_of_tri, width, base, texel_of,
                         1.0 / np.maximum(texels.area.astype(np.float64), 1e-30))
         srf = surfaces(sc)
         self._surfaces = (srf.cutout, srf.opacity, srf.opacity_tex, srf.tex_uvs, srf.pixels, srf.info)
