@@ -22,7 +22,7 @@ import time
 import numba
 import numpy as np
 
-from ..textures import opacity_at, surfaces
+from ..textures import hit_uv, opacity_at, surfaces
 from . import Estimate, Estimator, register
 
 # A landing's weight cos(shading normal) / cos(face normal) is capped: on a face tilted 30° from its
@@ -82,8 +82,9 @@ def _landing_texels(pos, direction, tri, positions, normals, uvs, lm_of_tri, wid
         cos_g /= np.sqrt(gx * gx + gy * gy + gz * gz)
         tilt = min(cos_s / cos_g, MAX_TILT)
         w = width[m]
-        u = (b0 * uvs[t, 0, 0] + b1 * uvs[t, 1, 0] + b2 * uvs[t, 2, 0]) * w
-        v = (b0 * uvs[t, 0, 1] + b1 * uvs[t, 1, 1] + b2 * uvs[t, 2, 1]) * w
+        u, v = hit_uv(uvs, t, b1, b2)  # lightmap UVs at the landing
+        u *= w
+        v *= w
         i = min(max(int(np.floor(u)), 0), w - 1)
         j = min(max(int(np.floor(v)), 0), w - 1)
         k = texel_of[base[m] + j * w + i]
@@ -128,10 +129,9 @@ class TexelHistogram(Estimator):
 
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)
-        self.scene = context.scene if context is not None and context.scene is not None else None
-        if self.scene is None:
+        sc = self.context.scene
+        if sc is None:
             raise ValueError("texel_histogram needs the scene's triangles (Context.scene)")
-        sc = self.scene
         lm_of_tri = np.full(sc.triangle_count, -1, np.int32)
         width = np.zeros(len(texels.lightmaps), np.int64)
         base = np.zeros(len(texels.lightmaps), np.int64)
