@@ -20,7 +20,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from . import __version__, denoise as denoise_mod, direct as direct_mod, estimators, images, interrupt, memory, \
-    sites as sites_mod, staging, texels as texels_mod
+    sites as sites_mod, staging, texels as texels_mod, validity
 from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
@@ -30,6 +30,12 @@ from .photons import PhotonBatch, PhotonTracer, RayCaster, TraceStats
 from .scene import Scene
 
 MAX_PHOTONS = 1_000_000_000
+# Automatic photon count (photons = 0): PHOTONS_PER_TEXEL for each lightmap texel to bake, within
+# AUTO_PHOTONS. At 16 a texel the default (histogram + OIDN) bake of a fully covered lightmap
+# lands about 4-8 indirect photons a texel; tracing costs about 0.4 s a million photons on 2 cores.
+PHOTONS_PER_TEXEL = 16
+RAYS_PER_SECOND = 2.0e6  # photon segments traced a second and thread, for the time a bake announces
+AUTO_PHOTONS = (1_000_000, 64_000_000)
 MAX_RESOLUTION = 16384
 MAX_BOUNCES = 1024
 DIRECT_MODES = ("sampled", "photons")
@@ -42,7 +48,7 @@ class BakeSettings:
     # texel_histogram: with shadow rays for direct light and OIDN, the best lightmap per second on
     # every scene measured (README, benchmarks/quality.py); disc_index: the best without a denoiser.
     estimator: str = "texel_histogram"
-    photons: int = 1_000_000
+    photons: int = 0  # 0: automatic, from the texels to bake (auto_photons)
     # sampled: direct light by shadow rays at every texel, the estimator sees indirect light only;
     # photons: the estimator sees every segment (the paper's experiments).
     direct: str = "sampled"
@@ -74,8 +80,8 @@ class BakeSettings:
             raise BakeError(f"setting '{setting}' = {value!r}: {why}")
         if self.estimator not in estimators.names():
             bad("estimator", self.estimator, f"choose one of {', '.join(estimators.names())}")
-        if not isinstance(self.photons, (int, np.integer)) or not 1 <= self.photons <= MAX_PHOTONS:
-            bad("photons", self.photons, f"must be between 1 and {MAX_PHOTONS:,}")
+        if not isinstance(self.photons, (int, np.integer)) or not 0 <= self.photons <= MAX_PHOTONS:
+            bad("photons", self.photons, f"must be 0 (automatic) or between 1 and {MAX_PHOTONS:,}")
         if self.direct not in DIRECT_MODES:
             bad("direct", self.direct, f"choose one of {', '.join(DIRECT_MODES)}")
         if not isinstance(self.direct_samples, (int, np.integer)) or \
@@ -257,6 +263,17 @@ def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional
         numba.set_num_threads(before)
 
 
+def auto_photons(scene: Scene, settings: BakeSettings) -> int:
+    """The photons a bake traces: the setting, or when it is 0, PHOTONS_PER_TEXEL for every texel
+    of the lightmaps to bake (objects without a resolution of their own take the setting's), within
+    AUTO_PHOTONS: more texels need more photons for the same noise per texel."""
+    if settings.photons:
+        return int(settings.photons)
+    texels = sum((o.resolution if o.resolution > 0 else settings.resolution) ** 2 for o in scene.objects if o.bake)
+    low, high = AUTO_PHOTONS
+    return int(min(max(PHOTONS_PER_TEXEL * texels, low), high))
+
+
 def _wide(settings: BakeSettings) -> BakeSettings:
     """The settings with the disc radius in texels set from the direct-light mode when unset."""
     if settings.estimator_settings.radius_texels is not None:
@@ -290,6 +307,8 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     for name in names:
         replace(settings, estimator=name).validate()
     scene.check()
+    automatic = not settings.photons
+    settings = replace(settings, photons=auto_photons(scene, settings))
     scene, offset = scene.recentred()  # float32 rays and discs work near the origin (scene.py)
     report = progress or (lambda p: None)
     cancelled = _cancel_fn(cancel)
@@ -304,9 +323,18 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     per_photon = memory.segments_per_photon(survival, bounces)
     per_photon_kept = memory.segments_per_photon(survival, bounces, first)
     batch_size = memory.batch_photons(settings.batch_size, per_photon)
+    if automatic:
+        threads = settings.threads or os.cpu_count() or 1
+        expect = settings.photons * per_photon / (RAYS_PER_SECOND * threads)
+        report(Progress("prepare", 0.0, f"Photons: {_si(settings.photons)}, chosen for the lightmaps' texels "
+                                        f"({PHOTONS_PER_TEXEL} a texel; set them with --photons); tracing them should "
+                                        f"take about {expect:.2g} s on {threads} threads"))
     need = _check_memory(scene, settings, names, batch_size, per_photon, per_photon_kept)
     t0 = time.perf_counter()
     texels = texels_mod.rasterise(scene)
+    caster = RayCaster(scene.positions)
+    # Walls and props standing on a texel's square: its sample point and the part that counts (validity.py).
+    texels.cuts = validity.find_cuts(texels, scene, caster, settings.threads or os.cpu_count() or 1)
     every = any(estimators.get(name).every_texel for name in names)
     sites = sites_mod.choose(texels, 1 if every else indirect_spacing(settings, frame_state))
     at = sites.texels  # where the estimators run
@@ -318,7 +346,6 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     reach = float(np.max(radius)) if discs and len(texels) else 0.0
     if discs and reach_of:
         reach = max(reach, _reach(scene, settings.estimator_settings, reach_of, settings.resolution))
-    caster = RayCaster(scene.positions)
     tracer = PhotonTracer(scene, settings.photons, bounces, settings.seed, batch_size, settings.threads,
                           indirect_only=sampled, caster=caster, margin=reach)
     direct_e, direct_info = None, {"mode": settings.direct}
@@ -427,6 +454,9 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
         spent[name] += totals.seconds[name]
     share = tracer.share
     estimate_progress(0.0)
+    # Texels a wall separates are denoised apart (validity.regions), in lightmaps that have cuts.
+    regions = {lm.name: validity.regions(texels, lm, texels.cuts, caster, scene) for lm in texels.lightmaps
+               if settings.denoise and (texels.cuts.of[lm.texels] >= 0).any()}
     results = {}
     for name in names:
         est = runs[name]
@@ -445,7 +475,7 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
         # An estimate with white noise is denoised apart from the direct light (denoise.py).
         apart = None if direct_e is None or not runs[name].for_denoiser else (direct_e / np.pi).astype(np.float32)
         result = _finish(replace(settings, estimator=name), bounces, texels, value, out.counters, tracer, seconds,
-                         direct_info, apart)
+                         direct_info, apart, regions)
         result.direct["denoised_apart"] = apart is not None and bool(result.raw_images)
         apart = None
         out = value = None
@@ -659,9 +689,10 @@ def _value(est, direct_e, share) -> np.ndarray:
 
 
 def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_info=None,
-            direct=None) -> BakeResult:
+            direct=None, regions=None) -> BakeResult:
     """The per-texel E/π `value` as dilated (and denoised) images. `direct`: the direct part of
-    `value`, to be denoised on its own and the rest (the indirect estimate) on its own."""
+    `value`, to be denoised on its own and the rest (the indirect estimate) on its own. `regions`:
+    {object name: texels that see each other (validity.regions)}, each denoised apart."""
     result_images, raw_images, masks, centre_masks = {}, {}, {}, {}
     warnings = []
     denoise = settings.denoise and denoise_mod.available()
@@ -678,15 +709,14 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
         if denoise:
             raw_images[lm.name] = raw
             area, _ = texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)
+            denoised = partial(denoise_mod.denoise_lightmap, mask=mask, margin=settings.margin, weights=area[..., 0],
+                               regions=(regions or {}).get(lm.name))
             if direct is None:
-                result_images[lm.name] = denoise_mod.denoise_lightmap(img, mask, margin=settings.margin,
-                                                                      weights=area[..., 0])
+                result_images[lm.name] = denoised(img)
             else:
                 first, _ = texels_mod.to_image(direct[lm.texels], lm, pixel)
                 rest = np.maximum(img - first, 0.0)
-                result_images[lm.name] = sum(denoise_mod.denoise_lightmap(part, mask, margin=settings.margin,
-                                                                          weights=area[..., 0])
-                                             for part in (first, rest))
+                result_images[lm.name] = denoised(first) + denoised(rest)
         else:
             result_images[lm.name] = raw
         masks[lm.name] = mask

@@ -115,7 +115,7 @@ def _check_guide(name: str, guide: Optional[np.ndarray], shape: tuple) -> Option
 def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.ndarray] = None,
                      normal: Optional[np.ndarray] = None, filter: Optional[str] = None,
                      keep_energy: bool = True, margin: int = 16, quality: str = "high",
-                     weights: Optional[np.ndarray] = None) -> np.ndarray:
+                     weights: Optional[np.ndarray] = None, regions: Optional[np.ndarray] = None) -> np.ndarray:
     """Denoise one lightmap and return a new (H, W, 3) float32 image in the same layout.
 
     image: (H, W, 3) irradiance E/π (HDR, ≥ 0), row 0 at the bottom as in texels.py; only the
@@ -136,6 +136,9 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     margin: rings of `texels.dilate` that refill the gutter from the denoised texels afterwards
     (pass the bake's margin setting); texels further out are 0, as a bake leaves them.
     quality: OIDN's "high" (default), "balanced" or "fast".
+    regions: (H, W) int labels of texels that see each other along the surface (validity.regions):
+    no light crosses from one region to a neighbouring one, as each class of regions that do not
+    touch is denoised apart (`region_classes`), the others being gutter to it.
 
     Raises BakeError for a bad shape or filter, NaN/inf in covered texels, a missing pyoidn, or
     an OIDN failure.
@@ -146,8 +149,9 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
         raise BakeError(f"denoise: lightmap must be (H, W, 3), got {image.shape}")
     if mask.shape != image.shape[:2]:
         raise BakeError(f"denoise: mask has shape {mask.shape}, the lightmap {image.shape[:2]}")
-    if weights is not None and np.shape(weights) != mask.shape:
-        raise BakeError(f"denoise: weights have shape {np.shape(weights)}, the lightmap {image.shape[:2]}")
+    for name, extra in (("weights", weights), ("regions", regions)):
+        if extra is not None and np.shape(extra) != mask.shape:
+            raise BakeError(f"denoise: {name} have shape {np.shape(extra)}, the lightmap {image.shape[:2]}")
     albedo = _check_guide("albedo", albedo, image.shape)
     normal = _check_guide("normal", normal, image.shape)
     if filter is None:
@@ -156,14 +160,61 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
         raise BakeError(f"denoise: unknown filter {filter!r} (choose from {', '.join(FILTERS)})")
     if filter == "RTLightmap" and (albedo is not None or normal is not None):
         raise BakeError("denoise: the RTLightmap filter takes no albedo or normal guide; use RT")
+    if quality not in QUALITY:
+        raise BakeError(f"denoise: unknown quality {quality!r} (choose from {', '.join(QUALITY)})")
+    result = np.zeros_like(image)
+    for part, box in region_classes(regions, mask):
+        crop = (slice(box[0], box[1]), slice(box[2], box[3]))
+        pick = lambda a: None if a is None else a[crop]  # noqa: E731
+        result[crop][part[crop]] = _denoise_part(image[crop], part[crop], pick(albedo), pick(normal), filter,
+                                                 keep_energy, QUALITY[quality], pick(weights))
+    return dilate(result, mask, margin)
 
+
+def region_classes(regions: Optional[np.ndarray], mask: np.ndarray) -> list:
+    """[(texels, (row0, row1, col0, col1))]: the covered texels in classes of regions of which no two
+    touch (8 ways), largest regions first, each with the box it is denoised in (its texels and
+    FILL_RINGS around them). One class, the whole image, without regions or with one."""
+    whole = (0, mask.shape[0], 0, mask.shape[1])
+    if regions is None or not mask.any():
+        return [(mask, whole)]
+    label = np.where(mask, regions, -1)
+    count = int(label.max()) + 1
+    if count <= 1:
+        return [(mask, whole)]
+    touch = set()
+    for a, b in ((label[:, :-1], label[:, 1:]), (label[:-1, :], label[1:, :]), (label[:-1, :-1], label[1:, 1:]),
+                 (label[:-1, 1:], label[1:, :-1])):
+        differ = (a >= 0) & (b >= 0) & (a != b)
+        touch.update(zip(a[differ].tolist(), b[differ].tolist()))
+    near = [set() for _ in range(count)]
+    for a, b in touch:
+        near[a].add(b)
+        near[b].add(a)
+    colour = np.full(count, -1)
+    for r in np.argsort(-np.bincount(label[label >= 0], minlength=count), kind="stable"):
+        used = {colour[o] for o in near[r]}
+        colour[r] = next(c for c in range(count) if c not in used)
+    out = []
+    for c in range(int(colour.max()) + 1):
+        part = mask & (colour[np.maximum(label, 0)] == c)
+        rows, cols = np.flatnonzero(part.any(axis=1)), np.flatnonzero(part.any(axis=0))
+        box = whole if c == 0 else (max(rows[0] - FILL_RINGS, 0), min(rows[-1] + FILL_RINGS + 1, mask.shape[0]),
+                                    max(cols[0] - FILL_RINGS, 0), min(cols[-1] + FILL_RINGS + 1, mask.shape[1]))
+        out.append((part, box))
+    return out
+
+
+def _denoise_part(image, mask, albedo, normal, filter, keep_energy, quality, weights) -> np.ndarray:
+    """The denoised values of the texels of `mask` ((K, 3) float32, in mask order), every other
+    texel taken for gutter."""
     # Irradiance is never negative; OIDN's HDR mode assumes so. Buffers are reused in place
     # (the same numbers): at 2048² each (H, W, 3) copy is 50 MB.
     src = _covered("lightmap", image, mask)
     np.maximum(src, 0.0, out=src)
     covered = src[mask]
     if not covered.any():  # all black stays black: OIDN returns up to 0.03 for an all-0 input
-        return np.zeros_like(image)
+        return np.zeros_like(covered)
     w = raw_mean = None
     if keep_energy:
         w = None if weights is None else np.asarray(weights, np.float64)[mask]
@@ -182,11 +233,8 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
                   "albedo": alb}
         if normal is not None:
             kwargs["normal"] = fill_gutter(_covered("normal guide", normal, mask), mask)
-
-    if quality not in QUALITY:
-        raise BakeError(f"denoise: unknown quality {quality!r} (choose from {', '.join(QUALITY)})")
     try:
-        result = _run_filter(color, filter, QUALITY[quality], **kwargs)
+        result = _run_filter(color, filter, quality, **kwargs)
     except (RuntimeError, ValueError, TypeError, OSError) as exc:  # OSError: OIDN's .so loads now
         raise BakeError(f"denoise: OIDN failed on a {image.shape[1]}x{image.shape[0]} lightmap "
                         f"({filter}): {exc}") from exc
@@ -199,9 +247,7 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
         den_mean = np.average(den, axis=0, weights=w)
         scale = np.where(den_mean > 0, raw_mean / np.where(den_mean > 0, den_mean, 1.0), 1.0)
         np.multiply(den, scale, out=den, casting="unsafe")  # in float64, rounded once to float32
-    result.fill(0.0)
-    result[mask] = den
-    return dilate(result, mask, margin)
+    return den
 
 
 _device = None

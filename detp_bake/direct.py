@@ -51,6 +51,7 @@ from .scattering import MAX_PASSES
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
 from .textures import opacity_at, surfaces
 from .texel_area import area_point, texel_squares
+from .texels import geometric_normals
 
 POINT, SUN, AREA, MESH, WORLD, WORLD_MAP = 0, 1, 2, 3, 4, 5
 FAR = 1e37
@@ -186,7 +187,8 @@ def _towards(sx, sy, sz, nx, ny, nz):
 
 @jit
 def _shadow_rays(kind, prm, j0, samples, stride, sel, counts, key, ids, a, b, pos, nrm, geo, eps,
-                 cdf, tpos, tnrm, trad, spread, sq_tri, sq_cx, sq_cy, sq_w, sq_h, uvs, positions, o, d, t, w, owner):
+                 cdf, tpos, tnrm, trad, spread, sq_tri, sq_cx, sq_cy, sq_w, sq_h, cut_of, cut_p, cut_n, uvs, positions,
+                 o, d, t, w, owner):
     """Rays for texels a … b−1 and one light: origins `o` (each at its own point of the texel's
     square: texel_area.py; offset along the geometric normal `geo`), unit directions `d`, far
     limits `t`, and `w` the RGB irradiance each adds when unoccluded (already divided by the sample
@@ -207,8 +209,8 @@ def _shadow_rays(kind, prm, j0, samples, stride, sel, counts, key, ids, a, b, po
         state, r0, r1 = uniform2(photon_rng(key, ids[i]))
         state, q0, q1 = uniform2(state)
         for j in range(j0, j0 + samples):
-            px, py, pz = area_point(spread, i, j, stride, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h, uvs, positions,
-                                    pos)
+            px, py, pz = area_point(spread, i, j, stride, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h,
+                                    cut_of, cut_p, cut_n, uvs, positions, pos)
             ox, oy, oz = px + eps * gx, py + eps * gy, pz + eps * gz
             u0 = (j + 0.5) * inv_s + r0
             u0 -= math.floor(u0)
@@ -427,18 +429,6 @@ def transmittance(caster, srf, o: np.ndarray, d: np.ndarray, far: np.ndarray, ep
         active = idx[left[idx] > 0.0]
     out[active] = 0.0  # past MAX_PASSES cut-outs: taken as blocked
     return out
-
-
-def geometric_normals(scene: Scene, triangle: np.ndarray, towards: np.ndarray) -> np.ndarray:
-    """Unit face normals of `triangle`, flipped to the side of the shading normals `towards`."""
-    # Per triangle first, then per texel: no (N, 3, 3) gather of corners for N texels.
-    used, index = np.unique(triangle, return_inverse=True)
-    p = scene.positions[used].astype(np.float64)
-    g = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
-    g = g[index.reshape(-1)]
-    g[np.einsum("ij,ij->i", g, towards) < 0.0] *= -1.0
-    return g
 
 
 def texel_ids(texels) -> np.ndarray:

@@ -126,7 +126,8 @@ def environment_emitter(env: EnvironmentMap, centre: np.ndarray, radius: float, 
 
 @jit
 def environment_rays(marginal, cond, prob, rot, pixels, samples, key, ids, a, b, pos, nrm, geo, eps, spread,
-                     sq_tri, sq_cx, sq_cy, sq_w, sq_h, uvs, positions, o, d, t, w, owner):
+                     sq_tri, sq_cx, sq_cy, sq_w, sq_h, cut_of, cut_p, cut_n, uvs, positions, o, d, t, w,
+                     owner):
     """Shadow rays towards the map for texels a … b−1 (see direct._shadow_rays), each from its own
     point of the texel's square: each adds L(ω)·cos θ / (p(ω)·samples) when nothing is in the way."""
     k = 0
@@ -147,8 +148,8 @@ def environment_rays(marginal, cond, prob, rot, pixels, samples, key, ids, a, b,
             if cos_x <= 0.0 or x * gx + y * gy + z * gz <= 0.0 or pdf <= 0.0:
                 continue
             scale = cos_x / pdf * inv_s
-            sx, sy, sz = area_point(spread, i, j, samples, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h, uvs, positions,
-                                    pos)
+            sx, sy, sz = area_point(spread, i, j, samples, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h,
+                                    cut_of, cut_p, cut_n, uvs, positions, pos)
             o[k, 0], o[k, 1], o[k, 2] = sx + eps * gx, sy + eps * gy, sz + eps * gz
             d[k, 0], d[k, 1], d[k, 2] = x, y, z
             t[k] = 1e37

@@ -283,7 +283,9 @@ class Job:
     def _work(self) -> None:
         global _running
         try:
-            self._send(Started(self.kind, list(self.names), self.settings.photons,
+            photons = bake_mod.auto_photons(self.scene, self.settings) if self.scene is not None else \
+                self.settings.photons
+            self._send(Started(self.kind, list(self.names), photons,
                                sum(o.bake for o in self.scene.objects) if self.scene is not None else 0))
             for message in self._warnings:
                 self._send(Warning(message))

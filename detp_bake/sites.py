@@ -182,7 +182,8 @@ def _site_texels(texels: TexelSet, index: np.ndarray, each: list) -> TexelSet:
         lightmaps.append(replace(lm, width=width, height=rows, offset=offset, count=len(mine)))
         offset += len(mine)
     return TexelSet(texels.position[index], texels.normal[index], texels.triangle[index], pixel,
-                    texels.area[index], texels.centre_inside[index], lightmaps)
+                    texels.area[index], texels.centre_inside[index], lightmaps,
+                    None if texels.cuts is None else texels.cuts.select(index))
 
 
 @numba.njit(cache=True)

@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from .sampling import inline
+from .texels import pixel_steps
+from .validity import Cuts, on_side
 
 TRIES = 8  # points tried per sample before the texel's own position is used
 SPAN = 0.5  # the square's width in texels: Cycles' bake jitter
@@ -37,11 +39,12 @@ def _radical_inverse(k, base):
 
 
 @inline
-def area_point(spread, i, j, samples, q0, q1, tri, cx, cy, sx, sy, uvs, positions, pos):
+def area_point(spread, i, j, samples, q0, q1, tri, cx, cy, sx, sy, cut_of, cut_p, cut_n, uvs, positions, pos):
     """Sample j of `samples` for texel i: a point of the square SPAN wide round its centre (cx, cy
     in pixels of an sx × sy lightmap) on its triangle `tri[i]` (lightmap UVs `uvs`, world `positions`), rotated by
-    (q0, q1); texel i's own position `pos[i]` when no tried point lies on the triangle, or when
-    not `spread`."""
+    (q0, q1), and on the texel's side of its cut (validity.py: `cut_of[i]`, a row of the cuts'
+    points `cut_p` and normals `cut_n`, −1 for none); texel i's own position `pos[i]` when no tried
+    point lies there, or when not `spread`."""
     if not spread:
         return pos[i, 0], pos[i, 1], pos[i, 2]
     t = tri[i]
@@ -61,22 +64,26 @@ def area_point(spread, i, j, samples, q0, q1, tri, cx, cy, sx, sy, uvs, position
             l1 = ((ey - ay) * (x - ex) + (ax - ex) * (y - ey)) / den
             l2 = 1.0 - l0 - l1
             if l0 >= 0.0 and l1 >= 0.0 and l2 >= 0.0:
-                return (l0 * positions[t, 0, 0] + l1 * positions[t, 1, 0] + l2 * positions[t, 2, 0],
-                        l0 * positions[t, 0, 1] + l1 * positions[t, 1, 1] + l2 * positions[t, 2, 1],
-                        l0 * positions[t, 0, 2] + l1 * positions[t, 1, 2] + l2 * positions[t, 2, 2])
+                px = l0 * positions[t, 0, 0] + l1 * positions[t, 1, 0] + l2 * positions[t, 2, 0]
+                py = l0 * positions[t, 0, 1] + l1 * positions[t, 1, 1] + l2 * positions[t, 2, 1]
+                pz = l0 * positions[t, 0, 2] + l1 * positions[t, 1, 2] + l2 * positions[t, 2, 2]
+                if on_side(cut_of, cut_p, cut_n, i, px, py, pz):
+                    return px, py, pz
     return pos[i, 0], pos[i, 1], pos[i, 2]
 
 
 def texel_squares(texels) -> tuple:
-    """(tri, cx, cy, sx, sy) for area_point: each texel's triangle, its centre in pixels, and its
-    lightmap's width and height (20 bytes per texel, for the direct pass only)."""
+    """(tri, cx, cy, sx, sy, cut_of, cut_p, cut_n) for area_point: each texel's triangle, its centre
+    in pixels, its lightmap's width and height, and its cut (24 bytes per texel, for the direct pass
+    only)."""
     sx = texels.per_texel([lm.width for lm in texels.lightmaps]).astype(np.float32)
     sy = texels.per_texel([lm.height for lm in texels.lightmaps]).astype(np.float32)
     width = np.maximum(sx.astype(np.int64), 1)
     pixel = texels.pixel.astype(np.int64)
     cx = (pixel % width).astype(np.float32) + np.float32(0.5)
     cy = (pixel // width).astype(np.float32) + np.float32(0.5)
-    return np.ascontiguousarray(texels.triangle, np.int32), cx, cy, sx, sy
+    cuts = texels.cuts if texels.cuts is not None else Cuts.none(len(texels))
+    return (np.ascontiguousarray(texels.triangle, np.int32), cx, cy, sx, sy, *cuts.kernel_arrays())
 
 
 def spread_reach(texels, scene) -> np.ndarray:
@@ -84,15 +91,6 @@ def spread_reach(texels, scene) -> np.ndarray:
     returns): half the diagonal of the SPAN-wide square on its triangle, in world metres, when its
     centre lies on the surface; at a chart's border, where its position is the point of its
     triangle nearest the centre, itself up to half a texel's diagonal away, that much more."""
-    tri, _, _, sx, sy = texel_squares(texels)
-    uv = scene.uvs[tri].astype(np.float64) * np.stack([sx, sy], axis=1)[:, None, :].astype(np.float64)
-    p = scene.positions[tri].astype(np.float64)
-    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    det = np.where(np.abs(det) > 1e-30, det, np.inf)  # a degenerate UV triangle: no spread (area_point)
-    f1, f2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
-    # World vectors of one pixel step along u and along v: the inverse of the UV edge matrix.
-    du = (f1 * e2[:, 1:2] - f2 * e1[:, 1:2]) / det[:, None]
-    dv = (f2 * e1[:, 0:1] - f1 * e2[:, 0:1]) / det[:, None]
+    du, dv = pixel_steps(texels, scene)
     return np.where(texels.centre_inside, 0.5 * SPAN, 0.5 + 0.5 * SPAN) * (np.linalg.norm(du, axis=1)
                                                                           + np.linalg.norm(dv, axis=1))

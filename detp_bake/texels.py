@@ -54,6 +54,7 @@ class TexelSet:
     area: np.ndarray  # (N,) float32, world area of surface inside the texel's square (sums to the total)
     centre_inside: np.ndarray  # (N,) bool: the texel centre lies on a UV triangle (Cycles bakes only these)
     lightmaps: list[Lightmap]
+    cuts: object = None  # validity.Cuts once the bake has looked for geometry on the texels' squares
 
     def __len__(self) -> int:
         return len(self.pixel)
@@ -290,6 +291,35 @@ def rasterise(scene: Scene) -> TexelSet:
     return TexelSet(*cat, lightmaps=lightmaps)
 
 
+def geometric_normals(scene: Scene, triangle: np.ndarray, towards: np.ndarray) -> np.ndarray:
+    """Unit face normals of `triangle`, flipped to the side of the shading normals `towards`."""
+    # Per triangle first, then per texel: no (N, 3, 3) gather of corners for N texels.
+    used, index = np.unique(triangle, return_inverse=True)
+    p = scene.positions[used].astype(np.float64)
+    g = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+    g = g[index.reshape(-1)]
+    g[np.einsum("ij,ij->i", g, towards) < 0.0] *= -1.0
+    return g
+
+
+def pixel_steps(texels: TexelSet, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """(du, dv): per texel, the world vectors of one pixel step along u and along v on its triangle
+    (the inverse of the triangle's UV edge matrix); 0 on a triangle with degenerate UVs."""
+    sx = texels.per_texel([lm.width for lm in texels.lightmaps])
+    sy = texels.per_texel([lm.height for lm in texels.lightmaps])
+    tri = texels.triangle
+    uv = scene.uvs[tri].astype(np.float64) * np.stack([sx, sy], axis=1)[:, None, :]
+    p = scene.positions[tri].astype(np.float64)
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    det = np.where(np.abs(det) > 1e-30, det, np.inf)
+    f1, f2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    du = (f1 * e2[:, 1:2] - f2 * e1[:, 1:2]) / det[:, None]
+    dv = (f2 * e1[:, 0:1] - f1 * e2[:, 0:1]) / det[:, None]
+    return du, dv
+
+
 def select(texels: TexelSet, mask: np.ndarray) -> TexelSet:
     """The texels where `mask` is set, as a TexelSet of their own: every lightmap keeps its place
     (with the count of its texels kept, maybe 0), so per-lightmap values still broadcast."""
@@ -300,7 +330,8 @@ def select(texels: TexelSet, mask: np.ndarray) -> TexelSet:
         lightmaps.append(replace(lm, offset=offset, count=count))
         offset += count
     return TexelSet(texels.position[mask], texels.normal[mask], texels.triangle[mask], texels.pixel[mask],
-                    texels.area[mask], texels.centre_inside[mask], lightmaps)
+                    texels.area[mask], texels.centre_inside[mask], lightmaps,
+                    None if texels.cuts is None else texels.cuts.select(mask))
 
 
 def to_image(values: np.ndarray, lm: Lightmap, pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -72,3 +72,44 @@ def make_scene(parts, lights, albedo=0.5, world=(0.0, 0.0, 0.0), resolution=64, 
     return Scene(positions=pos, normals=np.concatenate(nrm), uvs=np.concatenate(uv),
                  albedo=np.concatenate(alb), emission=np.zeros((len(pos), 3)), objects=objs,
                  lights=list(lights), world=np.asarray(world, float), default_bounces=bounces)
+
+
+def box(lo, hi):
+    """A closed box from corner `lo` to corner `hi`, faces outward, each face its own UV chart."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    corner = np.array([[hi[0] if i & 1 else lo[0], hi[1] if i & 2 else lo[1], hi[2] if i & 4 else lo[2]]
+                       for i in range(8)])
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    tris, nrm, uvs = [], [], []
+    for k, q in enumerate(quads):
+        p = corner[list(q)]
+        n = np.cross(p[1] - p[0], p[2] - p[0])
+        n /= np.linalg.norm(n)
+        u0, v0 = (k % 3) / 3, (k // 3) / 2
+        uv = np.array([[u0 + 0.02, v0 + 0.02], [u0 + 0.31, v0 + 0.02], [u0 + 0.31, v0 + 0.48], [u0 + 0.02, v0 + 0.48]])
+        for a, b, c in ((0, 1, 2), (0, 2, 3)):
+            tris.append(p[[a, b, c]])
+            nrm.append([n] * 3)
+            uvs.append(uv[[a, b, c]])
+    return np.array(tris), np.array(nrm), np.array(uvs)
+
+
+def joined(*meshes):
+    """One mesh of several (positions, normals, UVs) triples."""
+    return tuple(np.concatenate(part) for part in zip(*meshes))
+
+
+def sealed_room(lights, world=(0.0, 0.0, 0.0), resolution=64, ground=16.0, half=1.0, wall=0.06, height=2.5,
+                offset=(0.15, -0.08), bounces=4):
+    """A closed room (walls `wall` thick round a 2·`half` square, a roof; one object "Room", not
+    baked) standing on a ground quad `ground` metres wide (object "Ground", baked), moved by `offset`
+    off the texel grid: nothing from outside can reach the ground inside. The default offset puts a
+    row of texel centres under the south wall nearer its outer face, and a column under the west
+    wall nearer its inner face."""
+    h, t = half, wall
+    walls = joined(box((-h - t, -h - t, 0), (h + t, -h, height)), box((-h - t, h, 0), (h + t, h + t, height)),
+                   box((-h - t, -h, 0), (-h, h, height)), box((h, -h, 0), (h + t, h, height)),
+                   box((-h - t, -h - t, height), (h + t, h + t, height + t)))
+    walls = (walls[0] + np.array([offset[0], offset[1], 0.0]), walls[1], walls[2])
+    return make_scene([("Ground", grid(ground, ground, 8), 0.5, True), ("Room", walls, 0.6, False)], lights,
+                      world=world, resolution=resolution, bounces=bounces)

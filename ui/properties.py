@@ -15,8 +15,9 @@ ESTIMATORS = [(n, estimators.get(n).label, estimators.get(n).description) for n 
 class DETPBakeSettings(bpy.types.PropertyGroup):
     estimator: EnumProperty(name="Estimator", items=ESTIMATORS, default=_B.estimator,
                             description="Density estimator that turns photons into irradiance")
-    photons: IntProperty(name="Photons", default=_B.photons, min=1, max=bake.MAX_PHOTONS, soft_min=10_000,
-                         soft_max=50_000_000, description="Photons traced from the lights: more means less noise")
+    photons: IntProperty(name="Photons", default=_B.photons, min=0, max=bake.MAX_PHOTONS,
+                         soft_max=50_000_000, description="Photons traced from the lights: more means less noise; "
+                         f"0: automatic, {bake.PHOTONS_PER_TEXEL} per lightmap texel to bake")
     direct: EnumProperty(name="Direct Light", default=_B.direct,
                          items=[("sampled", "Shadow Rays", "Direct light sampled with shadow rays at every texel; "
                                  "photons carry indirect light only (sharp shadows, least noise)"),

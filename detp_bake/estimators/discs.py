@@ -28,6 +28,9 @@ SLAB = 0.25  # δ as a fraction of r, at most
 FLAT_SLAB = 0.02  # δ over the texel's own surface rise, as a fraction of r
 RISE_STEP = 0.01  # the rise is rounded up to steps of this fraction of r
 CLEARANCE_FLOOR = 0.25  # clearance cuts a disc to no less than this fraction of its radius
+# ... or of this one where something stands on the texel's square (a wall: validity.py), so that its
+# disc does not reach through to the far side
+CUT_FLOOR = 0.02
 KERNELS = {"constant": 0, "epanechnikov": 1}
 
 
@@ -85,7 +88,11 @@ def make_discs(texels: TexelSet, settings, scene_radius: float, clearance=None, 
         raise BakeError(f"setting 'kernel' = {settings.kernel!r}: choose {', '.join(KERNELS)}")
     radius = capped_radius(disc_radius(texels, settings), extent)
     if clearance is not None:
-        radius = np.minimum(radius, np.maximum(clearance, CLEARANCE_FLOOR * radius))
+        floor = CLEARANCE_FLOOR * radius
+        if texels.cuts is not None:
+            cut = texels.cuts.of >= 0
+            floor[cut] = CUT_FLOOR * radius[cut]
+        radius = np.minimum(radius, np.maximum(clearance, floor))
     if not np.all(radius > 0):
         raise BakeError("disc radius is zero: a lightmap has no texel area (check its UVs)")
     eps = 1e-6 * max(scene_radius, 1e-3)

@@ -13,9 +13,41 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..photons import RayCaster
+from ..validity import LIFT
 from . import Estimate, Estimator, register
+from .bvh import discs_meet_triangles
 
 CHUNK = 8192  # texels per k-NN query, bounds the (chunk, k, 3) gather
+
+
+class _Walls:
+    """What a texel's gather must not reach through: a hit beyond a wall (a floor inside a sealed
+    room gathers only from outside, where all its nearest hits are) is left out. Only texels whose
+    gather disc some triangle may cross cast rays, one per neighbour, lifted off both surfaces."""
+
+    def __init__(self, texels, scene):
+        self.texels = texels
+        self.scene = scene
+        self.caster = None if scene is None or scene.triangle_count == 0 else RayCaster(scene.positions)
+        self.lift = LIFT * texels.per_texel([lm.texel_size for lm in texels.lightmaps])
+
+    def hide(self, a, b, reach, hit_pos, hit_normal, ok):
+        """Clear `ok` (texels a … b−1 by neighbour) where a wall stands between texel and hit."""
+        if self.caster is None:
+            return
+        x = self.texels.position[a:b] + self.lift[a:b, None] * self.texels.normal[a:b]
+        suspect = discs_meet_triangles(self.scene.positions, x, self.texels.normal[a:b], reach)
+        rows, cols = np.nonzero(ok & suspect[:, None])
+        if rows.size == 0:
+            return
+        end = hit_pos[rows, cols].astype(np.float64) + self.lift[a + rows, None] * hit_normal[rows, cols]
+        span = end - x[rows]
+        length = np.linalg.norm(span, axis=1)
+        way = span / np.maximum(length, 1e-300)[:, None]
+        blocked = self.caster.occluded(np.ascontiguousarray(x[rows], np.float32),
+                                       np.ascontiguousarray(way, np.float32), length.astype(np.float32)) >= 0
+        ok[rows[blocked], cols[blocked]] = False
 
 
 @register
@@ -74,6 +106,7 @@ class PhotonMap(Estimator):
         tree = cKDTree(pos, balanced_tree=False, compact_nodes=False)
         t1 = time.perf_counter()
         cos_min = float(self.settings.normal_agreement)
+        walls = _Walls(self.texels, self.context.scene)
         used = 0
         for a in range(0, n, CHUNK):
             b = min(n, a + CHUNK)
@@ -86,6 +119,7 @@ class PhotonMap(Estimator):
             front = np.einsum("nkc,nc->nk", wdir[near], nrm) < 0.0
             agree = np.einsum("nkc,nc->nk", hnorm[near], nrm) >= cos_min
             ok = front & agree
+            walls.hide(a, b, dist[:, k - 1], pos[near], hnorm[near], ok)
             used += int(ok.sum())
             total = np.einsum("nk,nkc->nc", ok.astype(np.float64), flux[near].astype(np.float64))
             r2 = np.maximum(dist[:, k - 1], 1e-12) ** 2

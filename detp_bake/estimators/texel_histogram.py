@@ -23,6 +23,7 @@ import numba
 import numpy as np
 
 from ..textures import hit_uv, opacity_at, surfaces
+from ..validity import Cuts, on_side
 from . import Estimate, Estimator, register
 
 # A landing's weight cos(shading normal) / cos(face normal) is capped: on a face tilted 30° from its
@@ -32,12 +33,13 @@ MAX_TILT = 4.0
 
 @numba.njit(cache=True, parallel=True)
 def _landing_texels(pos, direction, tri, positions, normals, uvs, lm_of_tri, width, base, texel_of, inv_area,
-                    cutout, opacity, opacity_tex, tex_uvs, pixels, info, texel, weight):
+                    cut_of, cut_p, cut_n, cutout, opacity, opacity_tex, tex_uvs, pixels, info, texel, weight):
     """Per landing, its texel (−1: none of ours, or from behind) and the weight of its flux: one over
     the texel's area, the ratio of its cosines to the shading and the face normal, and on a cut-out
     surface one over its opacity α too. A photon lands there with
     probability α and passes through otherwise (scattering.py), so a landing counts 1/α times and
-    stands for every arrival, on average."""
+    stands for every arrival, on average. A landing beyond its texel's cut (a wall standing on the
+    square: validity.py) is not the texel's light and is left out."""
     for h in numba.prange(tri.shape[0]):
         texel[h] = -1
         t = tri[h]
@@ -89,6 +91,8 @@ def _landing_texels(pos, direction, tri, positions, normals, uvs, lm_of_tri, wid
         j = min(max(int(np.floor(v)), 0), w - 1)
         k = texel_of[base[m] + j * w + i]
         if k < 0:
+            continue
+        if not on_side(cut_of, cut_p, cut_n, k, pos[h, 0], pos[h, 1], pos[h, 2]):
             continue
         a = inv_area[k] * tilt
         if cutout:
@@ -146,9 +150,14 @@ class TexelHistogram(Estimator):
         for m, lm in enumerate(texels.lightmaps):
             texel_of[base[m] + texels.pixel[lm.texels]] = np.arange(lm.offset, lm.offset + lm.count, dtype=np.int32)
         # The scene's own arrays, not copies (the bake's are float64 positions, float32 normals and UVs).
+        # A texel cut by a wall (validity.py) counts the landings on its own side, over that side's area.
+        cuts = texels.cuts if texels.cuts is not None else Cuts.none(len(texels))
+        area = texels.area.astype(np.float64)
+        cut = cuts.of >= 0
+        area[cut] *= cuts.share[cuts.of[cut]]
         self._tables = (np.ascontiguousarray(sc.positions), np.ascontiguousarray(sc.normals),
                         np.ascontiguousarray(sc.uvs), lm_of_tri, width, base, texel_of,
-                        1.0 / np.maximum(texels.area.astype(np.float64), 1e-30))
+                        1.0 / np.maximum(area, 1e-30), *cuts.kernel_arrays())
         srf = surfaces(sc)
         self._surfaces = (srf.cutout, srf.opacity, srf.opacity_tex, srf.tex_uvs, srf.pixels, srf.info)
         self.acc = np.zeros((len(texels), 3))

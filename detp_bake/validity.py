@@ -1,0 +1,249 @@
+"""Texel validity: the part of a texel's square that light can reach from the texel's own side.
+
+A texel is a square of surface, and other geometry may stand on it: a wall on a floor, a box on a
+table. Light that falls on the square's far side of the wall is not light of the texel's side, and a
+texel whose centre lies under the wall stands for nothing anyone sees. Read as they are, such
+texels give a floor inside a sealed room a rim of sunlight from outside.
+
+So before any light is gathered, every texel with geometry near it casts DIRECTIONS probe rays along
+its surface (LIFT texel sizes above it, as far as its square reaches):
+- a texel whose centre lies inside a solid (two opposite probes both meet faces from behind, as
+  under a wall with thickness, or one probe does and so does a ray straight up from the surface, as
+  under a box; a one-sided wall beside the texel is not a solid) moves its sample point
+  just out of the solid, across the nearest face it met from behind: it takes the light of the side
+  it is moved to (Godot's lightmapper "unoccludes" its texels the same way);
+- the nearest face met (after the move, the face it moved across) cuts the texel's square along a
+  line, and only the side of the sample point counts: direct light's shadow rays start there
+  (texel_area.area_point), photon landings on the other side are left out and the texel's area is
+  the share on its side (texel histogram).
+One cut a texel: in a corner where two walls cross one square, the nearer one.
+
+The denoiser must not carry light across a wall either. `regions` splits each lightmap's texels
+into groups that see each other along the surface: neighbouring texels are linked unless a ray
+between their sample points (lifted as above) is blocked. The bake denoises each group apart
+(denoise.py). Only texels with a cut can lose a link, so the rays are few.
+"""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from .estimators.bvh import discs_meet_triangles
+from .sampling import inline
+from .texels import TexelSet, geometric_normals, pixel_steps
+
+DIRECTIONS = 8  # probe rays per texel, in opposite pairs
+LIFT = 0.02  # probe height above the surface, in texel sizes
+REACH = 0.75  # probe length, in texel sizes: past the half-diagonal of the square (0.707)
+PUSH = 0.05  # how far past the face a moved sample point lands, in texel sizes
+STANDING = np.cos(np.radians(45.0))  # faces steeper than this against the texel's surface stand on it
+GRID = 6  # points a side over the square, for the share on the sample point's side
+MIN_SHARE = 1.0 / (GRID * GRID)
+CHUNK = 1 << 15
+
+
+@dataclass
+class Cuts:
+    """Per texel with a cut, the two lines that bound its square (the second's normal 0 where only
+    one wall crosses it): a point on each and its unit normal (in the texel's tangent plane)
+    towards the texel's side, and the share of the square on that side."""
+    of: np.ndarray  # (N,) int32: each texel's row below, −1 where nothing cuts it
+    point: np.ndarray  # (C, 2, 3) float64
+    normal: np.ndarray  # (C, 2, 3) float64
+    share: np.ndarray  # (C,) float64, MIN_SHARE … 1
+    moved: int = 0  # texels whose centre lay inside a solid
+
+    @classmethod
+    def none(cls, n: int) -> "Cuts":
+        return cls(np.full(n, -1, np.int32), np.zeros((0, 2, 3)), np.zeros((0, 2, 3)), np.zeros(0))
+
+    def select(self, mask: np.ndarray) -> "Cuts":
+        return Cuts(self.of[mask], self.point, self.normal, self.share, self.moved)
+
+    def kernel_arrays(self) -> tuple:
+        """(of, point, normal) for the compiled kernels: at least one row each, so numba sees arrays."""
+        point = self.point if len(self.point) else np.zeros((1, 2, 3))
+        normal = self.normal if len(self.normal) else np.zeros((1, 2, 3))
+        return (np.ascontiguousarray(self.of, np.int32), np.ascontiguousarray(point, np.float64),
+                np.ascontiguousarray(normal, np.float64))
+
+
+@inline
+def on_side(cut_of, cut_p, cut_n, i, x, y, z):
+    """Whether point (x, y, z) lies on texel i's side of its cut (compiled kernels)."""
+    c = cut_of[i]
+    if c < 0:
+        return True
+    for line in range(2):
+        if ((x - cut_p[c, line, 0]) * cut_n[c, line, 0] + (y - cut_p[c, line, 1]) * cut_n[c, line, 1]
+                + (z - cut_p[c, line, 2]) * cut_n[c, line, 2]) < 0.0:
+            return False
+    return True
+
+
+def _frame(g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    helper = np.where(np.abs(g[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t = np.cross(g, helper)
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    return t, np.cross(g, t)
+
+
+def _probe(caster, origin, g, reach):
+    """Probe rays of each texel: (directions (D, n, 3), distances (D, n) inf where nothing, unit
+    face normals (D, n, 3) as Embree orients them)."""
+    t, s = _frame(g)
+    angle = 2.0 * np.pi * np.arange(DIRECTIONS) / DIRECTIONS
+    d = np.cos(angle)[:, None, None] * t + np.sin(angle)[:, None, None] * s
+    o = np.ascontiguousarray(np.tile(origin, (DIRECTIONS, 1)), np.float32)
+    far = np.tile(reach.astype(np.float32), DIRECTIONS)
+    dist, prim, ng = caster.intersect(o, np.ascontiguousarray(d.reshape(-1, 3), np.float32), far)
+    dist = np.where(prim >= 0, dist, np.inf).reshape(DIRECTIONS, -1).astype(np.float64)
+    ng = ng.reshape(DIRECTIONS, -1, 3).astype(np.float64)
+    ng /= np.maximum(np.linalg.norm(ng, axis=2, keepdims=True), 1e-300)
+    # A face within 45° of the texel's own plane is its own surface curving up (the inside of a
+    # sphere, a fillet), not something standing on it.
+    dist[np.abs(np.einsum("knc,nc->kn", ng, g)) >= STANDING] = np.inf
+    return d, dist, ng
+
+
+def _towards(ng, g, way, back):
+    """Unit normals of faces met along `way`, laid into the tangent plane (normal `g`) and turned
+    towards `back` (from the face to the sample point); along −`way` for a face parallel to it."""
+    m = ng - np.einsum("nc,nc->n", ng, g)[:, None] * g
+    length = np.linalg.norm(m, axis=1)
+    m = np.where((length > 0.2)[:, None], m / np.maximum(length, 1e-300)[:, None], -way)
+    m[np.einsum("nc,nc->n", back, m) < 0.0] *= -1.0
+    return m
+
+
+def _cut_chunk(caster, pos, g, du, dv, size):
+    """Cuts of one chunk of texels near geometry: (moved position, whether moved, has a cut, point,
+    normal, share)."""
+    n = len(pos)
+    lift = LIFT * size
+    d, dist, ng = _probe(caster, pos + lift[:, None] * g, g, REACH * size)
+    hit = np.isfinite(dist)
+    back = hit & (np.einsum("knc,knc->kn", ng, d) > 0.0)
+    half = DIRECTIONS // 2
+    inside = (back[:half] & back[half:]).any(axis=0)
+    maybe = np.flatnonzero(back.any(axis=0) & ~inside)
+    if maybe.size:  # under a solid wider than the probes reach: its top is met from behind too
+        up = g[maybe]
+        o = np.ascontiguousarray(pos[maybe] + lift[maybe, None] * up, np.float32)
+        far = np.full(maybe.size, 1e30, np.float32)
+        _, prim, ng_up = caster.intersect(o, np.ascontiguousarray(up, np.float32), far)
+        inside[maybe] = (prim >= 0) & (np.einsum("nc,nc->n", ng_up.astype(np.float64), up) > 0.0)
+    rows = np.arange(n)
+    # The face to cross (inside a solid) or to stop at (otherwise): the nearest one met from
+    # behind, or the nearest one met at all.
+    pick = np.where(inside, np.argmin(np.where(back, dist, np.inf), axis=0), np.argmin(dist, axis=0))
+    has = hit.any(axis=0)
+    way = d[pick, rows]
+    along = np.where(has, dist[pick, rows], 0.0)
+    point = pos + way * along[:, None]
+    moved = pos + way * (along + PUSH * size)[:, None]
+    new_pos = np.where(inside[:, None], moved, pos)
+    m = _towards(ng[pick, rows], g, way, new_pos - point)
+    # A second line where another wall crosses the square (a corner): the nearest face met that
+    # does not lie along the first.
+    m_all = np.stack([_towards(ng[k], g, d[k], new_pos - (pos + d[k] * np.where(hit[k], dist[k], 0.0)[:, None]))
+                      for k in range(DIRECTIONS)])
+    other = hit & (np.abs(np.einsum("knc,nc->kn", m_all, m)) < 0.9)
+    second = np.argmin(np.where(other, dist, np.inf), axis=0)
+    has2 = other.any(axis=0)
+    point2 = pos + d[second, rows] * np.where(has2, dist[second, rows], 0.0)[:, None]
+    m2 = np.where(has2[:, None], m_all[second, rows], 0.0)
+    points = np.stack([point, point2], axis=1)
+    normals = np.stack([m, m2], axis=1)
+    # The share of the square on the sample point's side, from a grid of points over it.
+    f = (np.arange(GRID) + 0.5) / GRID - 0.5
+    fu, fv = np.meshgrid(f, f)
+    grid = pos[:, None, :] + fu.reshape(1, -1, 1) * du[:, None, :] + fv.reshape(1, -1, 1) * dv[:, None, :]
+    side = np.einsum("nlpc,nlc->nlp", grid[:, None] - points[:, :, None], normals) >= 0.0
+    share = np.mean(side.all(axis=1), axis=1)
+    return new_pos, inside & has, has, points, normals, np.maximum(share, MIN_SHARE)
+
+
+def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
+    """The cuts of every texel with geometry standing on its square; texels whose centre lies inside
+    a solid have their `position` moved out, in place (module docstring)."""
+    n = len(texels)
+    cuts = Cuts.none(n)
+    if n == 0:
+        return cuts
+    du, dv = pixel_steps(texels, scene)
+    size = 0.5 * (np.linalg.norm(du, axis=1) + np.linalg.norm(dv, axis=1))
+    size = np.where(np.isfinite(size) & (size > 0), size, 0.0)
+    g = geometric_normals(scene, texels.triangle, texels.normal)
+    near = discs_meet_triangles(scene.positions, texels.position + (LIFT * size)[:, None] * g, g, REACH * size)
+    todo = np.flatnonzero(near & (size > 0))
+    if todo.size == 0:
+        return cuts
+    chunks = [todo[a:a + CHUNK] for a in range(0, todo.size, CHUNK)]
+
+    def run(idx):
+        return idx, _cut_chunk(caster, texels.position[idx], g[idx], du[idx], dv[idx], size[idx])
+
+    with ThreadPoolExecutor(max(1, int(threads))) as pool:
+        done = list(pool.map(run, chunks))
+    points, normals, shares = [], [], []
+    rows = 0
+    moved = 0
+    for idx, (new_pos, inside, has, point, m, share) in done:
+        texels.position[idx] = new_pos
+        moved += int(inside.sum())
+        cut = idx[has]
+        cuts.of[cut] = rows + np.arange(cut.size, dtype=np.int32)
+        rows += cut.size
+        points.append(point[has])
+        normals.append(m[has])
+        shares.append(share[has])
+    cuts.point = np.concatenate(points)
+    cuts.normal = np.concatenate(normals)
+    cuts.share = np.concatenate(shares)
+    cuts.moved = moved
+    return cuts
+
+
+def regions(texels: TexelSet, lm, cuts: Cuts, caster, scene) -> np.ndarray:
+    """(H, W) int32 image of lightmap `lm`: each covered texel's group of texels that see each other
+    along the surface (0, 1, …; −1 in the gutter). Neighbours (8 ways) are linked unless a ray
+    between their sample points, lifted off the surface, is blocked; only texels with a cut can
+    lose a link."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    sl = lm.texels
+    grid = np.full(lm.width * lm.height, -1, np.int64)
+    grid[texels.pixel[sl]] = np.arange(lm.count)
+    grid = grid.reshape(lm.height, lm.width)
+    cut = cuts.of[sl] >= 0
+    pairs = []
+    for a, b in ((grid[:, :-1], grid[:, 1:]), (grid[:-1, :], grid[1:, :]), (grid[:-1, :-1], grid[1:, 1:]),
+                 (grid[:-1, 1:], grid[1:, :-1])):
+        ok = (a >= 0) & (b >= 0)
+        pairs.append(np.stack([a[ok], b[ok]], axis=1))
+    pairs = np.concatenate(pairs)
+    keep = np.ones(len(pairs), bool)
+    test = np.flatnonzero(cut[pairs[:, 0]] | cut[pairs[:, 1]])
+    if test.size:
+        i, j = pairs[test, 0] + lm.offset, pairs[test, 1] + lm.offset
+        lift = LIFT * lm.texel_size
+        gi = geometric_normals(scene, texels.triangle[i], texels.normal[i])
+        gj = geometric_normals(scene, texels.triangle[j], texels.normal[j])
+        a = texels.position[i] + lift * gi
+        span = texels.position[j] + lift * gj - a
+        length = np.linalg.norm(span, axis=1)
+        way = span / np.maximum(length, 1e-300)[:, None]
+        far = length.astype(np.float32)
+        blocked = caster.occluded(np.ascontiguousarray(a, np.float32), np.ascontiguousarray(way, np.float32),
+                                  far) >= 0
+        keep[test[blocked & (length > 0)]] = False
+    links = pairs[keep]
+    graph = coo_matrix((np.ones(len(links), np.int8), (links[:, 0], links[:, 1])), shape=(lm.count, lm.count))
+    _, label = connected_components(graph, directed=False)
+    out = np.full(lm.width * lm.height, -1, np.int32)
+    out[texels.pixel[sl]] = label
+    return out.reshape(lm.height, lm.width)
