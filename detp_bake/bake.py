@@ -19,7 +19,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from . import __version__, denoise as denoise_mod, direct as direct_mod, estimators, images, interrupt, memory, \
+from . import __version__, charts as charts_mod, denoise as denoise_mod, direct as direct_mod, estimators, images, interrupt, memory, \
     sites as sites_mod, staging, texels as texels_mod, validity
 from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
@@ -175,6 +175,8 @@ class BakeResult:
             "settings": settings,
             "objects": [{"name": lm.name, "resolution": [lm.width, lm.height], "texels": lm.count,
                          "texel_size": lm.texel_size, "files": self.files.get(lm.name, []),
+                         "charts": {"count": lm.charts, "median_width": round(lm.chart_width, 2),
+                                    "border": round(lm.border, 4)},
                          **({"key": self.keys[lm.name], "reused": False} if lm.name in self.keys else {})}
                         for lm in self.texels.lightmaps] + [{**entry, "reused": True} for entry in self.reused.values()],
             **({"reused": list(self.reused)} if self.keys else {}),
@@ -642,6 +644,9 @@ def layout_warnings(texels, estimator_settings, radius=None) -> list:
             out.append(f"object '{lm.name}': {100 * lm.overlap:.0f} % of its lightmap texels lie under two or more "
                        "faces (overlapping lightmap UVs, e.g. Array or Mirror copies sharing them): those faces get "
                        "one shared value; give every face its own UV space (Lightmap Pack)")
+        fragmented = charts_mod.warning(lm)
+        if fragmented:
+            out.append(fragmented)
         if lm.outside >= OUTSIDE_WARNING:
             out.append(f"object '{lm.name}': {100 * lm.outside:.1f} % of its lightmap UV area lies outside 0..1 and is "
                        "not baked: unwrap it into 0..1 (Lightmap Pack)")

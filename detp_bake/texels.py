@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
+from . import charts as charts_mod
 from .errors import BakeError
 from .scene import Scene
 
@@ -36,6 +37,11 @@ class Lightmap:
     # and the share of the UV area outside 0..1 (not baked at all).
     overlap: float = 0.0
     outside: float = 0.0
+    # The UV charts (charts.py): how many, the median one's width in texels (the side of a square of
+    # its area), and the share of covered texels on a chart's border (a 4-neighbour not of its chart).
+    charts: int = 0
+    chart_width: float = 0.0
+    border: float = 0.0
 
     @property
     def texels(self) -> slice:
@@ -277,7 +283,8 @@ def rasterise(scene: Scene) -> TexelSet:
         held = int(np.count_nonzero(inside))
         overlap = float(np.count_nonzero(inside > 1)) / held if held else 0.0
         outside = max(0.0, 1.0 - within / total) if total > 0 else 0.0
-        lightmaps.append(Lightmap(obj.name, index, res, res, offset, len(pixel), texel_size, overlap, outside))
+        stats = charts_mod.chart_stats(uv[sl], res, pixel, best_tri[pixel])
+        lightmaps.append(Lightmap(obj.name, index, res, res, offset, len(pixel), texel_size, overlap, outside, *stats))
         parts.append([pos, nrm, tri, pixel, cover[pixel].astype(np.float32), best_d2[pixel] <= 1e-9])
         offset += len(pixel)
     if not parts:

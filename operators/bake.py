@@ -29,6 +29,7 @@ class BakeJob(BlenderJob):
                                     "segments": summary["segments"], "objects": len(r.files),
                                     "seconds": summary["seconds"], "files": r.files,
                                     "noise": summary["noise"], "stopped_by": summary["stopped_by"],
+                                    "charts": {o["name"]: o["charts"] for o in summary["objects"] if "charts" in o},
                                     "output_directory": self.out_dir})
         total = sum(v for k, v in r.seconds.items() if k != "rasterise")
         for warning in self.warnings:

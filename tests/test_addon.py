@@ -105,7 +105,9 @@ def test_every_panel_draws_existing_properties_and_operators(addon, cornell, bpy
             s.estimator, s.resolution_mode, s.radius_mode = estimator, mode, "WORLD" if mode == "DENSITY" else "TEXELS"
             s.last_report = "" if estimator == "disc_index" else json.dumps(
                 {"estimator": estimator, "objects": 7, "photons": 10, "segments": 20,
-                 "seconds": {"export": 0.1, "trace": 1.0, "estimate": 0.5, "write": 0.1}})
+                 "seconds": {"export": 0.1, "trace": 1.0, "estimate": 0.5, "write": 0.1},
+                 "charts": {"Floor": {"count": 1, "median_width": 64.0, "border": 0.06},
+                            "Arena": {"count": 4000, "median_width": 2.5, "border": 0.8}}})
             for cls in panels.classes:
                 if hasattr(cls, "poll") and not cls.poll(bpy.context):
                     continue

@@ -197,6 +197,10 @@ class DETPBAKE_PT_stats(_Panel, bpy.types.Panel):
         if r.get("noise"):
             worst = max(r["noise"], key=r["noise"].get)
             col.label(text=f"Noise: {r['noise'][worst]:.2g} % at most ({worst})")
+        if r.get("charts"):  # the most fragmented lightmap: its charts, their median width, border texels
+            name, c = min(r["charts"].items(), key=lambda item: item[1]["median_width"])
+            col.label(text=f"Charts: {c['count']:,} in '{name}', {c['median_width']:.1f} texels wide, "
+                           f"{100 * c['border']:.0f} % border")
         if r.get("stopped_by", "photons") != "photons":
             col.label(text=f"Stopped by {r['stopped_by'].replace('_', ' ')}")
         for phase in ("export", "direct", "build", "trace", "estimate", "denoise", "write"):

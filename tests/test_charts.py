@@ -1,0 +1,44 @@
+"""Chart statistics of a lightmap (charts.py) and the warning for a fragmented unwrap."""
+import numpy as np
+
+from detp_bake import charts, texels as texels_mod
+from detp_bake.bake import BakeSettings, compute
+from detp_bake.scene import SunLight
+from synthetic import grid, make_scene
+
+
+def _quads_apart(n, shrink):
+    """An n×n grid plane whose quads are each their own UV chart, shrunk round its centre."""
+    pos, nrm, uv = grid(2.0, 2.0, n)
+    centre = uv.reshape(-1, 6, 2).mean(axis=1).repeat(2, axis=0)[:, None, :]
+    return pos, nrm, centre + shrink * (uv - centre)
+
+
+def test_chart_statistics_of_known_charts():
+    """One chart filling the lightmap: 1 chart as wide as the lightmap, border texels only round the
+    edge. 64 quads apart, each 0.7 of an eighth of the lightmap: 64 charts 5.6 texels wide at 64²."""
+    one = texels_mod.rasterise(make_scene([("One", grid(2.0, 2.0, 8), 0.5, True)], [], resolution=64)).lightmaps[0]
+    assert (one.charts, one.chart_width) == (1, 64.0)
+    np.testing.assert_allclose(one.border, (64 * 4 - 4) / 64 ** 2)
+    apart = texels_mod.rasterise(make_scene([("Apart", _quads_apart(8, 0.7), 0.5, True)], [],
+                                            resolution=64)).lightmaps[0]
+    assert apart.charts == 64
+    np.testing.assert_allclose(apart.chart_width, 64 / 8 * 0.7, rtol=1e-9)
+    assert 0.3 < apart.border < 0.6
+    count, chart = charts.chart_of_triangles(_quads_apart(2, 0.5)[2])
+    assert count == 4 and list(chart) == [0, 0, 1, 1, 2, 2, 3, 3]
+
+
+def test_a_fragmented_unwrap_is_warned_about_and_a_clean_one_is_not():
+    sun = SunLight("Sun", np.array([0.0, 0.0, -1.0]), np.full(3, 3.0))
+    scene = make_scene([("Clean", grid(2.0, 2.0, 8), 0.5, True), ("Shards", _quads_apart(16, 0.6), 0.5, True)],
+                       [sun], resolution=32)
+    r = compute(scene, BakeSettings(photons=20_000, denoise=False, bounces=0))
+    said = [w for w in r.warnings if "charts" in w]
+    print(said)
+    assert len(said) == 1 and said[0].startswith("object 'Shards': its lightmap UVs are 256 charts with a median "
+                                                 "width of 1.2 texels at 32x32")
+    assert "Unwrap Lightmap UVs" in said[0] and "raise its resolution to about 128" in said[0]
+    shards = next(o for o in r.report()["objects"] if o["name"] == "Shards")
+    assert shards["charts"]["count"] == 256 and shards["charts"]["median_width"] == 1.2
+    assert shards["charts"]["border"] > 0.9
