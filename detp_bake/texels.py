@@ -313,10 +313,13 @@ def geometric_normals(scene: Scene, triangle: np.ndarray, towards: np.ndarray) -
 def pixel_steps(texels: TexelSet, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """(du, dv): per texel, the world vectors of one pixel step along u and along v on its triangle
     (the inverse of the triangle's UV edge matrix); 0 on a triangle with degenerate UVs."""
-    sx = texels.per_texel([lm.width for lm in texels.lightmaps])
-    sy = texels.per_texel([lm.height for lm in texels.lightmaps])
-    tri = texels.triangle
-    uv = scene.uvs[tri].astype(np.float64) * np.stack([sx, sy], axis=1)[:, None, :]
+    # Per triangle and lightmap, then per texel.
+    count = len(texels.lightmaps)
+    key = texels.triangle.astype(np.int64) * count + texels.per_texel(np.arange(count)).astype(np.int64)
+    used, index = np.unique(key, return_inverse=True)
+    tri, lm = used // count, used % count
+    sides = np.array([[m.width, m.height] for m in texels.lightmaps], np.float64).reshape(-1, 2)
+    uv = scene.uvs[tri].astype(np.float64) * sides[lm][:, None, :]
     p = scene.positions[tri].astype(np.float64)
     e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
@@ -324,7 +327,8 @@ def pixel_steps(texels: TexelSet, scene: Scene) -> tuple[np.ndarray, np.ndarray]
     f1, f2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
     du = (f1 * e2[:, 1:2] - f2 * e1[:, 1:2]) / det[:, None]
     dv = (f2 * e1[:, 0:1] - f1 * e2[:, 0:1]) / det[:, None]
-    return du, dv
+    index = index.reshape(-1)
+    return du[index], dv[index]
 
 
 def select(texels: TexelSet, mask: np.ndarray) -> TexelSet:

@@ -53,14 +53,14 @@ class Cuts:
     point: np.ndarray  # (C, 2, 3) float64
     normal: np.ndarray  # (C, 2, 3) float64
     share: np.ndarray  # (C,) float64, MIN_SHARE … 1
-    moved: int = 0  # texels whose centre lay inside a solid
+    moved: np.ndarray = None  # (N,) bool: the texel's centre lay inside a solid and was moved out
 
     @classmethod
     def none(cls, n: int) -> "Cuts":
-        return cls(np.full(n, -1, np.int32), np.zeros((0, 2, 3)), np.zeros((0, 2, 3)), np.zeros(0))
+        return cls(np.full(n, -1, np.int32), np.zeros((0, 2, 3)), np.zeros((0, 2, 3)), np.zeros(0), np.zeros(n, bool))
 
     def select(self, mask: np.ndarray) -> "Cuts":
-        return Cuts(self.of[mask], self.point, self.normal, self.share, self.moved)
+        return Cuts(self.of[mask], self.point, self.normal, self.share, self.moved[mask])
 
     def kernel_arrays(self) -> tuple:
         """(of, point, normal) for the compiled kernels: at least one row each, so numba sees arrays."""
@@ -190,10 +190,9 @@ def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
         done = list(pool.map(run, chunks))
     points, normals, shares = [], [], []
     rows = 0
-    moved = 0
     for idx, (new_pos, inside, has, point, m, share) in done:
         texels.position[idx] = new_pos
-        moved += int(inside.sum())
+        cuts.moved[idx] = inside
         cut = idx[has]
         cuts.of[cut] = rows + np.arange(cut.size, dtype=np.int32)
         rows += cut.size
@@ -203,7 +202,6 @@ def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
     cuts.point = np.concatenate(points)
     cuts.normal = np.concatenate(normals)
     cuts.share = np.concatenate(shares)
-    cuts.moved = moved
     return cuts
 
 
