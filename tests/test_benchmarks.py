@@ -99,3 +99,17 @@ def test_disc_index_embree_benchmark(tmp_path):
     _run("disc_index_embree.py", "--quick", "--case", "room", "--repeat", "1", "--no-staggered",
          "--json", str(out))
     assert out.exists() and out.stat().st_size > 0
+
+
+@pytest.mark.blender  # the level is built and unwrapped in Blender
+def test_levels_benchmark(tmp_path):
+    text = _run("levels.py", "--quick", "--out", str(tmp_path))
+    data = json.loads((tmp_path / "levels.json").read_text())
+    row = data["phases"][0]
+    assert data["faces"] > 30_000 and row["size"] == 64 and row["photons"] == 1_000_000
+    assert {"rasterise", "direct", "trace", "estimate", "denoise"} <= set(row["seconds"]) and row["oidn_alone"] > 0
+    assert row["charts"]["count"] > 500 and row["warned"]  # Smart UV Project at 64²: fragments, and said so
+    methods = [r["method"] for r in data["race"]["rows"]]
+    assert methods[0].startswith("ours") and methods[-1] == "Cycles 8 spp + OIDN"
+    assert all(0 < r["error"] < 2 for r in data["race"]["rows"])
+    assert "| 64² |" in text and "Race at 32²" in text
