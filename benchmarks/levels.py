@@ -210,7 +210,8 @@ def race(bpy, size: int, spps, reference_spp: int, log) -> dict:
         order = np.argsort(-e)
         at = float(np.exp(np.interp(np.log(row["error"]), e[order], t[order])))
         row["ratio"] = row["seconds"] / at
-        log(f"{row['method']}: {100 * row['error']:.2f} % in {row['seconds']:.1f} s ({row['ratio']:.2f} of Cycles + OIDN)")
+        log(f"{row['method']}: {100 * row['error']:.2f} % in {row['seconds']:.1f} s "
+            f"({row['ratio']:.2f} of Cycles + OIDN)")
     return {"size": size, "reference_spp": reference_spp, "rows": rows}
 
 

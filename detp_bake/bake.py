@@ -19,8 +19,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from . import __version__, charts as charts_mod, denoise as denoise_mod, direct as direct_mod, estimators, images, interrupt, memory, \
-    sites as sites_mod, staging, texels as texels_mod, validity
+from . import __version__, charts as charts_mod, denoise as denoise_mod, direct as direct_mod, estimators, images, \
+    interrupt, memory, sites as sites_mod, staging, texels as texels_mod, validity
 from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings

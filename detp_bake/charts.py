@@ -76,6 +76,6 @@ def warning(lm) -> str | None:
         return None
     suggest = int(min(16384, 2 ** np.ceil(np.log2(lm.width * max(NARROW / max(lm.chart_width, 1e-3), 1.0)))))
     return (f"object '{lm.name}': its lightmap UVs are {lm.charts:,} charts with a median width of "
-            f"{lm.chart_width:.1f} texels at {lm.width}x{lm.height}, and {100 * lm.border:.0f} % of its texels lie on a "
-            "chart's border (few photons, fragments for the denoiser, seams): unwrap it with Unwrap Lightmap UVs "
+            f"{lm.chart_width:.1f} texels at {lm.width}x{lm.height}, and {100 * lm.border:.0f} % of its texels lie "
+            "on a chart's border (few photons, fragments for the denoiser, seams): unwrap it with Unwrap Lightmap UVs "
             f"(xatlas: merged charts at the lightmap's texel density) or raise its resolution to about {suggest}")

@@ -48,7 +48,8 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--photons", type=int, default=None,
                    help=f"photons to trace (default: {bake_mod.PHOTONS_PER_TEXEL} per lightmap texel to bake, "
                         f"{bake_mod._si(bake_mod.AUTO_PHOTONS[0])} to {bake_mod._si(bake_mod.AUTO_PHOTONS[1])}; with "
-                        f"--target-noise or --time-limit, the most to trace, default {bake_mod._si(bake_mod.MAX_PHOTONS)})")
+                        f"--target-noise or --time-limit, the most to trace, "
+                        f"default {bake_mod._si(bake_mod.MAX_PHOTONS)})")
     b.add_argument("--target-noise", type=float, default=_B.target_noise, metavar="PERCENT",
                    help="trace photons in batches until every lightmap's relative noise is at most this")
     b.add_argument("--time-limit", type=float, default=_B.time_limit, metavar="SECONDS",

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from .sampling import inline
-from .texels import pixel_steps
+from .texels import pixel_steps, texel_centres
 from .validity import Cuts, on_side
 
 TRIES = 8  # points tried per sample before the texel's own position is used
@@ -76,12 +76,7 @@ def texel_squares(texels) -> tuple:
     """(tri, cx, cy, sx, sy, cut_of, cut_p, cut_n) for area_point: each texel's triangle, its centre
     in pixels, its lightmap's width and height, and its cut (24 bytes per texel, for the direct pass
     only)."""
-    sx = texels.per_texel([lm.width for lm in texels.lightmaps]).astype(np.float32)
-    sy = texels.per_texel([lm.height for lm in texels.lightmaps]).astype(np.float32)
-    width = np.maximum(sx.astype(np.int64), 1)
-    pixel = texels.pixel.astype(np.int64)
-    cx = (pixel % width).astype(np.float32) + np.float32(0.5)
-    cy = (pixel // width).astype(np.float32) + np.float32(0.5)
+    cx, cy, sx, sy = texel_centres(texels)
     cuts = texels.cuts if texels.cuts is not None else Cuts.none(len(texels))
     return (np.ascontiguousarray(texels.triangle, np.int32), cx, cy, sx, sy, *cuts.kernel_arrays())
 

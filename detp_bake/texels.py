@@ -331,6 +331,18 @@ def pixel_steps(texels: TexelSet, scene: Scene) -> tuple[np.ndarray, np.ndarray]
     return du[index], dv[index]
 
 
+def texel_centres(texels: TexelSet) -> tuple:
+    """(cx, cy, sx, sy) float32: each texel's centre in pixels of its lightmap, and that lightmap's
+    width and height."""
+    sx = texels.per_texel([lm.width for lm in texels.lightmaps]).astype(np.float32)
+    sy = texels.per_texel([lm.height for lm in texels.lightmaps]).astype(np.float32)
+    width = np.maximum(sx.astype(np.int64), 1)
+    pixel = texels.pixel.astype(np.int64)
+    cx = (pixel % width).astype(np.float32) + np.float32(0.5)
+    cy = (pixel // width).astype(np.float32) + np.float32(0.5)
+    return cx, cy, sx, sy
+
+
 def select(texels: TexelSet, mask: np.ndarray) -> TexelSet:
     """The texels where `mask` is set, as a TexelSet of their own: every lightmap keeps its place
     (with the count of its texels kept, maybe 0), so per-lightmap values still broadcast."""

@@ -32,7 +32,7 @@ import numpy as np
 
 from .estimators.bvh import discs_meet_triangles
 from .sampling import inline
-from .texels import TexelSet, geometric_normals, pixel_steps
+from .texels import TexelSet, geometric_normals, pixel_steps, texel_centres
 
 DIRECTIONS = 8  # probe rays per texel, in opposite pairs
 LIFT = 0.02  # probe height above the surface, in texel sizes
@@ -118,9 +118,9 @@ def _towards(ng, g, way, back):
     return m
 
 
-def _cut_chunk(caster, pos, g, du, dv, size):
-    """Cuts of one chunk of texels near geometry: (moved position, whether moved, has a cut, point,
-    normal, share)."""
+def _cut_chunk(caster, pos, g, size):
+    """Cuts of one chunk of texels near geometry: (moved position, whether moved, has a cut, points,
+    normals)."""
     n = len(pos)
     lift = LIFT * size
     d, dist, ng = _probe(caster, pos + lift[:, None] * g, g, REACH * size)
@@ -155,15 +155,27 @@ def _cut_chunk(caster, pos, g, du, dv, size):
     has2 = other.any(axis=0)
     point2 = pos + d[second, rows] * np.where(has2, dist[second, rows], 0.0)[:, None]
     m2 = np.where(has2[:, None], m_all[second, rows], 0.0)
-    points = np.stack([point, point2], axis=1)
-    normals = np.stack([m, m2], axis=1)
-    # The share of the square on the sample point's side, from a grid of points over it.
+    return new_pos, inside & has, has, np.stack([point, point2], axis=1), np.stack([m, m2], axis=1)
+
+
+def _shares(points, normals, uv, corners, cx, cy):
+    """The share of each texel's surface that lies on its side of its cut lines: of a GRID² grid of
+    points over its square (centre `cx, cy` in pixels; its triangle's `uv` in pixels and world
+    `corners`), those on its triangle; all of them (the triangle's plane) where none is."""
     f = (np.arange(GRID) + 0.5) / GRID - 0.5
-    fu, fv = np.meshgrid(f, f)
-    grid = pos[:, None, :] + fu.reshape(1, -1, 1) * du[:, None, :] + fv.reshape(1, -1, 1) * dv[:, None, :]
-    side = np.einsum("nlpc,nlc->nlp", grid[:, None] - points[:, :, None], normals) >= 0.0
-    share = np.mean(side.all(axis=1), axis=1)
-    return new_pos, inside & has, has, points, normals, np.maximum(share, MIN_SHARE)
+    fu, fv = (a.reshape(1, -1) for a in np.meshgrid(f, f))
+    x, y = cx[:, None] + fu, cy[:, None] + fv
+    (ax, ay), (bx, by), (ex, ey) = ((uv[:, k, 0, None], uv[:, k, 1, None]) for k in range(3))
+    den = (by - ey) * (ax - ex) + (ex - bx) * (ay - ey)
+    den = np.where(np.abs(den) > 1e-30, den, 1e-30)
+    l0 = ((by - ey) * (x - ex) + (ex - bx) * (y - ey)) / den
+    l1 = ((ey - ay) * (x - ex) + (ax - ex) * (y - ey)) / den
+    l2 = 1.0 - l0 - l1
+    world = sum(l[..., None] * corners[:, None, k] for k, l in enumerate((l0, l1, l2)))
+    near = (np.einsum("nlpc,nlc->nlp", world[:, None] - points[:, :, None], normals) >= 0.0).all(axis=1)
+    on = (l0 >= 0.0) & (l1 >= 0.0) & (l2 >= 0.0)
+    on[~on.any(axis=1)] = True
+    return np.maximum((near & on).sum(axis=1) / on.sum(axis=1), MIN_SHARE)
 
 
 def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
@@ -183,8 +195,15 @@ def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
         return cuts
     chunks = [todo[a:a + CHUNK] for a in range(0, todo.size, CHUNK)]
 
+    cx, cy, sx, sy = texel_centres(texels)
+    uvs = scene.uvs.astype(np.float64)
+
     def run(idx):
-        return idx, _cut_chunk(caster, texels.position[idx], g[idx], du[idx], dv[idx], size[idx])
+        found = _cut_chunk(caster, texels.position[idx], g[idx], size[idx])
+        tri = texels.triangle[idx]
+        uv = uvs[tri] * np.stack([sx[idx], sy[idx]], axis=1).astype(np.float64)[:, None, :]
+        share = _shares(found[3], found[4], uv, scene.positions[tri].astype(np.float64), cx[idx], cy[idx])
+        return idx, (*found, share)
 
     with ThreadPoolExecutor(max(1, int(threads))) as pool:
         done = list(pool.map(run, chunks))

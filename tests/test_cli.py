@@ -51,7 +51,7 @@ def test_python_m_detp_bake_bakes_applies_and_saves(tmp_path, bpy):
 @pytest.mark.parametrize("extra, message", [
     (["--resolution", "0"], "resolution"),
     (["--photons", "5000000000"], "photons"),
-    (["--photons", "0"], "photons"),
+    (["--photons", "-5"], "photons"),
     (["--estimator", "nope"], "estimator"),
     (["--k", "1"], "'k'"),
     (["--format", "tiff"], "formats"),
