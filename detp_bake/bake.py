@@ -353,7 +353,7 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
         reach = max(reach, _reach(scene, settings.estimator_settings, reach_of, settings.resolution))
     tracer = PhotonTracer(scene, settings.photons, bounces, settings.seed, batch_size, settings.threads,
                           indirect_only=sampled, caster=caster, margin=reach)
-    direct_e, direct_info = None, {"mode": settings.direct}
+    direct_e, sharp_e, direct_info = None, None, {"mode": settings.direct}
     if sampled:
         def direct_progress(fraction):
             if cancelled():
@@ -364,8 +364,11 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
             direct_e, info = frame_direct.direct_irradiance(frame_state, scene, texels, caster, settings.direct_samples,
                                                             settings.seed, tracer.threads, direct_progress, cancelled)
         else:
+            # The sharp lights' part stays as the shadow rays give it when the lightmaps are denoised.
+            sharp_e = np.zeros((len(texels), 3), np.float32) if settings.denoise and denoise_mod.available() else None
             direct_e, info = direct_mod.direct_irradiance(scene, texels, caster, settings.direct_samples,
-                                                          settings.seed, tracer.threads, direct_progress, cancelled)
+                                                          settings.seed, tracer.threads, direct_progress, cancelled,
+                                                          sharp=sharp_e)
         direct_info.update(info)
 
     def estimate_progress(fraction):
@@ -479,10 +482,12 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
                    "estimate": spent[name]}
         # An estimate with white noise is denoised apart from the direct light (denoise.py).
         apart = None if direct_e is None or not runs[name].for_denoiser else (direct_e / np.pi).astype(np.float32)
+        sharp = None if apart is None or sharp_e is None else (sharp_e / np.pi).astype(np.float32)
         result = _finish(replace(settings, estimator=name), bounces, texels, value, out.counters, tracer, seconds,
-                         direct_info, apart, regions)
+                         direct_info, apart, regions, sharp)
         result.direct["denoised_apart"] = apart is not None and bool(result.raw_images)
-        apart = None
+        result.direct["sharp_kept"] = sharp is not None and bool(result.raw_images)
+        apart = sharp = None
         out = value = None
         result.stopped_by = stopped_by
         result.share = share
@@ -699,10 +704,12 @@ def _value(est, direct_e, share) -> np.ndarray:
 
 
 def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_info=None,
-            direct=None, regions=None) -> BakeResult:
+            direct=None, regions=None, sharp=None) -> BakeResult:
     """The per-texel E/π `value` as dilated (and denoised) images. `direct`: the direct part of
-    `value`, to be denoised on its own and the rest (the indirect estimate) on its own. `regions`:
-    {object name: texels that see each other (validity.regions)}, each denoised apart."""
+    `value`, to be denoised on its own and the rest (the indirect estimate) on its own; `sharp`: the
+    part of `direct` from point, spot and sun lights, kept as it is (their shadow rays are exact
+    away from penumbrae; docs/real_levels.md). `regions`: {object name: texels that see each other
+    (validity.regions)}, each denoised apart."""
     result_images, raw_images, masks, centre_masks = {}, {}, {}, {}
     warnings = []
     denoise = settings.denoise and denoise_mod.available()
@@ -726,7 +733,13 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
             else:
                 first, _ = texels_mod.to_image(direct[lm.texels], lm, pixel)
                 rest = np.maximum(img - first, 0.0)
-                result_images[lm.name] = denoised(first) + denoised(rest)
+                if sharp is None:
+                    result_images[lm.name] = denoised(first) + denoised(rest)
+                else:
+                    kept, _ = texels_mod.to_image(sharp[lm.texels], lm, pixel)
+                    soft = np.maximum(first - kept, 0.0)
+                    result_images[lm.name] = texels_mod.dilate(kept, mask, settings.margin) + denoised(soft) \
+                        + denoised(rest)
         else:
             result_images[lm.name] = raw
         masks[lm.name] = mask

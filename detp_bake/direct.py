@@ -54,6 +54,9 @@ from .texel_area import area_point, texel_squares
 from .texels import geometric_normals
 
 POINT, SUN, AREA, MESH, WORLD, WORLD_MAP = 0, 1, 2, 3, 4, 5
+# Point, spot and sun lights: exact away from penumbrae (every ray agrees), even with a radius or an
+# angle; area lights, emissive meshes and the world are noisy wherever they are partly hidden.
+SHARP_KINDS = (POINT, SUN)
 FAR = 1e37
 CHUNK = 2048  # texels per work item
 DEFAULT_SAMPLES = 16
@@ -443,7 +446,7 @@ def texel_ids(texels) -> np.ndarray:
 def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPLES, seed: int = 0,
                       threads: int = 1, progress: Optional[Callable[[float], None]] = None,
                       cancel: Optional[Callable[[], bool]] = None, spread: bool = True,
-                      select: bool = True) -> tuple[np.ndarray, dict]:
+                      select: bool = True, sharp: Optional[np.ndarray] = None) -> tuple[np.ndarray, dict]:
     """Direct irradiance E (N, 3) W/m² at every texel, and counters for report.json. Each chunk
     sums its texels' rays in float64 and stores them as float32: the value is only stored until
     the estimate is added to it, and float32 holds it to the precision of the lightmap images.
@@ -453,7 +456,9 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     stream, and each texel is summed by one chunk. `spread`: rays start all over the texel's square
     (texel_area.py, as Cycles bakes), or all at its position (its centre, for closed-form checks).
     `select`: the lights with extent share `samples` rays each per texel, dealt out by what each
-    would give the texel unshadowed (light_shares), instead of `samples` rays each."""
+    would give the texel unshadowed (light_shares), instead of `samples` rays each. `sharp`, an
+    (N, 3) float32 array when given, receives the part of point, spot and sun lights (SHARP_KINDS):
+    their rays all agree away from penumbrae, so that part needs no denoising (bake._finish)."""
     t0 = time.perf_counter()
     lights = direct_lights(scene, int(samples), spread)
     n = len(texels)
@@ -498,6 +503,7 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
         w = np.empty((most, 3))
         owner = np.empty(most, np.int64)
         acc = np.zeros((b - a, 3))
+        sharp_acc = np.zeros((b - a, 3)) if sharp is not None else None
 
         def cast(light, key, j0, count, sel, into, counts=no_counts):
             """Rays of `light` (samples j0 … j0 + count − 1) into `into`; for a light with a top-up,
@@ -543,7 +549,11 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
                     n0, n1 = light.samples, light.extra
                     own[mixed] = (n0 * own[mixed] + n1 * more[mixed]) / (n0 + n1)
             acc += own
+            if sharp is not None and light.kind in SHARP_KINDS:
+                sharp_acc += own
         out[a:b] = acc
+        if sharp is not None:
+            sharp[a:b] = sharp_acc
         with lock:
             done[0] += 1
             fraction = done[0] / len(chunks)

@@ -214,3 +214,24 @@ def test_missing_pyoidn_is_a_bake_error_naming_the_package(monkeypatch):
     assert not denoise.available()
     with pytest.raises(BakeError, match="pyoidn"):
         denoise.denoise_lightmap(np.ones((8, 8, 3), np.float32), np.ones((8, 8), bool))
+
+
+def test_sharp_lights_are_not_denoised():
+    """Point and sun light (bake._finish keeps their part as the shadow rays give it): with nothing
+    else to denoise (no bounce, no sky), the denoised lightmap is the raw one (to float32 rounding);
+    add a sky and only the sky's part moves."""
+    from detp_bake.bake import BakeSettings, compute
+    from detp_bake.scene import PointLight, SunLight
+    from synthetic import box, grid, joined, make_scene
+
+    lights = [SunLight("Sun", np.array([0.3, -0.2, -0.93]), np.full(3, 3.0), angle=np.radians(0.5)),
+              PointLight("Lamp", np.array([0.5, 0.5, 1.0]), np.full(3, 40.0), radius=0.05)]
+    props = joined(box((-0.3, -0.3, 0.0), (0.3, 0.3, 0.4)), box((0.6, -0.8, 0.0), (0.66, -0.74, 1.5)))
+    parts = [("Floor", grid(3.0, 3.0, 6), 0.5, True), ("Props", props, 0.5, False)]
+    r = compute(make_scene(parts, lights, resolution=48), BakeSettings(photons=1000, bounces=0, keep_raw=True))
+    assert r.direct["sharp_kept"] and r.report()["denoised"]
+    np.testing.assert_allclose(r.images["Floor"], r.raw_images["Floor"], rtol=1e-6, atol=1e-6)
+    sky = compute(make_scene(parts, lights, world=(0.3, 0.4, 0.5), resolution=48),
+                  BakeSettings(photons=1000, bounces=0, keep_raw=True))
+    moved = np.abs(sky.images["Floor"] - sky.raw_images["Floor"])[sky.masks["Floor"]]
+    assert 0 < moved.max() < 0.3 * np.pi * 0.4 / np.pi  # the sky's noise smoothed, never more than its own light
