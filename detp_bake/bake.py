@@ -481,8 +481,8 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
                    "clearance": clearance_seconds, "build": build[name], "trace": tracer.stats.seconds,
                    "estimate": spent[name]}
         # An estimate with white noise is denoised apart from the direct light (denoise.py).
-        apart = None if direct_e is None or not runs[name].for_denoiser else (direct_e / np.pi).astype(np.float32)
-        sharp = None if apart is None or sharp_e is None else (sharp_e / np.pi).astype(np.float32)
+        apart = None if direct_e is None or not runs[name].for_denoiser else direct_e
+        sharp = None if apart is None else sharp_e
         result = _finish(replace(settings, estimator=name), bounces, texels, value, out.counters, tracer, seconds,
                          direct_info, apart, regions, sharp)
         result.direct["denoised_apart"] = apart is not None and bool(result.raw_images)
@@ -705,9 +705,9 @@ def _value(est, direct_e, share) -> np.ndarray:
 
 def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_info=None,
             direct=None, regions=None, sharp=None) -> BakeResult:
-    """The per-texel E/π `value` as dilated (and denoised) images. `direct`: the direct part of
-    `value`, to be denoised on its own and the rest (the indirect estimate) on its own; `sharp`: the
-    part of `direct` from point, spot and sun lights, kept as it is (their shadow rays are exact
+    """The per-texel E/π `value` as dilated (and denoised) images. `direct`: the direct irradiance E
+    in `value`, to be denoised on its own and the rest (the indirect estimate) on its own; `sharp`:
+    the part of `direct` from point, spot and sun lights, kept as it is (their shadow rays are exact
     away from penumbrae; docs/real_levels.md). `regions`: {object name: texels that see each other
     (validity.regions)}, each denoised apart."""
     result_images, raw_images, masks, centre_masks = {}, {}, {}, {}
@@ -731,15 +731,18 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
             if direct is None:
                 result_images[lm.name] = denoised(img)
             else:
-                first, _ = texels_mod.to_image(direct[lm.texels], lm, pixel)
+                # E/π, lightmap by lightmap: no float32 copy of the whole bake's direct light.
+                first, _ = texels_mod.to_image(direct[lm.texels] / np.float32(np.pi), lm, pixel)
                 rest = np.maximum(img - first, 0.0)
-                if sharp is None:
-                    result_images[lm.name] = denoised(first) + denoised(rest)
-                else:
-                    kept, _ = texels_mod.to_image(sharp[lm.texels], lm, pixel)
-                    soft = np.maximum(first - kept, 0.0)
-                    result_images[lm.name] = texels_mod.dilate(kept, mask, settings.margin) + denoised(soft) \
-                        + denoised(rest)
+                if sharp is not None:
+                    kept, _ = texels_mod.to_image(sharp[lm.texels] / np.float32(np.pi), lm, pixel)
+                    first = np.maximum(first - kept, 0.0, out=first)  # what the soft emitters gave
+                    kept = texels_mod.dilate(kept, mask, settings.margin)
+                out = denoised(rest)
+                del rest
+                out += denoised(first)
+                del first
+                result_images[lm.name] = out if sharp is None else np.add(out, kept, out=out)
         else:
             result_images[lm.name] = raw
         masks[lm.name] = mask

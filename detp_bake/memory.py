@@ -30,13 +30,18 @@ BATCH_SETS = 3  # record sets alive at once (photons._ArrayPool.KEEP)
 # Measured with benchmarks/memory.py (2048², a 5 % gutter): a disc_index bake needed about 500
 # bytes a texel before issue 10's cuts, about 300 after; the figures here are 1.1 times the
 # measured peaks, so the estimate stays above them when every pixel is a texel.
-TEXEL_BYTES = 61 + 2 * 12
+# Since texel validity (validity.py): its cut index and moved flag (5), the sharp lights' part of
+# the direct light (12) and the region labels (4).
+TEXEL_BYTES = 61 + 2 * 12 + 5 + 12 + 4
 PIXEL_BYTES = 3 * 12 + 2  # raw, denoised and dilated float32 RGB, two masks
 # Denoising, one lightmap at a time: OIDN's scratch, bounded by denoise.MAX_MEMORY_MB (about 560
 # bytes a pixel below that), and the float32 images the denoiser works on beside it.
 OIDN_BYTES_PER_PIXEL = 560
 OIDN_MOST = 350_000_000
-DENOISE_PIXEL_BYTES = 6 * 12 + 4
+# Measured 429 bytes a texel at 2048² (benchmarks/memory.py, texel histogram, OIDN's peak): the
+# bake's value, raw, direct, indirect, sharp and result images, and the denoiser's source, filled
+# colour, output and result, 14 float32 RGB images in all, plus labels and masks.
+DENOISE_PIXEL_BYTES = 14 * 12 + 12
 MAX_BATCH_SEGMENTS = 4_000_000  # segments one batch may hold (160 MB of records per set)
 MIN_BATCH = 1000
 
