@@ -235,3 +235,28 @@ def test_sharp_lights_are_not_denoised():
                   BakeSettings(photons=1000, bounces=0, keep_raw=True))
     moved = np.abs(sky.images["Floor"] - sky.raw_images["Floor"])[sky.masks["Floor"]]
     assert 0 < moved.max() < 0.3 * np.pi * 0.4 / np.pi  # the sky's noise smoothed, never more than its own light
+
+
+def test_big_lightmaps_denoise_soft_and_indirect_light_in_one_run(monkeypatch):
+    """From bake.ONE_PASS_FROM pixels the sky's light and the indirect light go through OIDN together:
+    one run instead of two (the sun's light is kept, not denoised); the energy is the same."""
+    from detp_bake import bake as bake_mod
+    from detp_bake.bake import BakeSettings, compute
+    from detp_bake.scene import SunLight
+    from synthetic import box, grid, make_scene
+
+    sun = SunLight("Sun", np.array([0.3, -0.2, -0.93]), np.full(3, 3.0), angle=np.radians(0.5))
+    parts = [("Floor", grid(3.0, 3.0, 6), 0.5, True), ("Box", box((-0.3, -0.3, 0.0), (0.3, 0.3, 0.4)), 0.5, False)]
+    runs = []
+    real = denoise._run_filter
+    monkeypatch.setattr(denoise, "_run_filter", lambda *a, **k: runs.append(a[0].shape) or real(*a, **k))
+    means = {}
+    for one_pass in (10 ** 9, 32 * 32):
+        monkeypatch.setattr(bake_mod, "ONE_PASS_FROM", one_pass)
+        runs.clear()
+        r = compute(make_scene(parts, [sun], world=(0.3, 0.4, 0.5), resolution=32, bounces=2),
+                    BakeSettings(photons=200_000))
+        means[one_pass] = r.images["Floor"][r.masks["Floor"]].mean()
+        assert len(runs) == (2 if one_pass > 32 * 32 else 1), runs
+    a, b = means.values()
+    assert abs(a / b - 1) < 0.003
