@@ -36,6 +36,9 @@ import scenes  # noqa: E402  (puts the repository root on sys.path)
 
 import numpy as np  # noqa: E402
 
+sys.path.insert(0, str(scenes.ROOT / "tests"))
+from blender_helpers import lambert, sky_world  # noqa: E402  (the test suite's scene-making helpers)
+
 from detp_bake import denoise  # noqa: E402
 from detp_bake.bake import BakeSettings, compute  # noqa: E402
 
@@ -108,13 +111,7 @@ def make_level(bpy, seed: int = 0):
     me = bpy.data.meshes.new("Arena")
     bm.to_mesh(me)
     bm.free()
-    mat = bpy.data.materials.new("Concrete")
-    if mat.node_tree is None or bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
-    for socket, value in (("Base Color", (0.6, 0.58, 0.55, 1.0)), ("Roughness", 1.0), ("Specular IOR Level", 0.0)):
-        bsdf.inputs[socket].default_value = value
-    me.materials.append(mat)
+    me.materials.append(lambert(bpy, "Concrete", (0.6, 0.58, 0.55)))
     obj = bpy.data.objects.new("Arena", me)
     scene.collection.objects.link(obj)
     me.uv_layers.new(name="UVMap")
@@ -131,13 +128,7 @@ def make_level(bpy, seed: int = 0):
     sun_obj = bpy.data.objects.new("Sun", sun)
     sun_obj.rotation_euler = SUN
     scene.collection.objects.link(sun_obj)
-    world = bpy.data.worlds.new("Sky")
-    scene.world = world
-    if world.node_tree is None or bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
-    bg.inputs["Color"].default_value = (*SKY, 1.0)
-    bg.inputs["Strength"].default_value = 1.0
+    sky_world(bpy, scene, SKY)
     return scene, len(me.polygons)
 
 

@@ -37,6 +37,8 @@ from typing import Optional
 
 import numpy as np
 
+from scipy.ndimage import find_objects
+
 from .errors import BakeError
 from .texels import dilate
 
@@ -45,6 +47,7 @@ FILTERS = ("RT", "RTLightmap")
 # network sees tens of texels around each output texel, but what it sees past a few rings of a
 # smooth continuation hardly changes the chart's texels; a ring costs ~10 ms at 512² here.
 FILL_RINGS = 16
+MIN_REGION = 64  # texels: a region walled off from its neighbours is denoised only from this size
 MAX_MEMORY_MB = 256  # OIDN's maxMemoryMB: it keeps near it (330 MB measured at 2048²) whatever the size
 QUALITY = {"high": 6, "balanced": 5, "fast": 4}  # OIDN_QUALITY_*
 
@@ -137,8 +140,8 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     (pass the bake's margin setting); texels further out are 0, as a bake leaves them.
     quality: OIDN's "high" (default), "balanced" or "fast".
     regions: (H, W) int labels of texels that see each other along the surface (validity.regions):
-    no light crosses from one region to a neighbouring one, as each class of regions that do not
-    touch is denoised apart (`region_classes`), the others being gutter to it.
+    no light crosses from one region to a neighbouring one, as regions that touch are denoised in
+    different runs (`region_runs`), every texel outside a run being gutter to it.
 
     Raises BakeError for a bad shape or filter, NaN/inf in covered texels, a missing pyoidn, or
     an OIDN failure.
@@ -163,46 +166,56 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     if quality not in QUALITY:
         raise BakeError(f"denoise: unknown quality {quality!r} (choose from {', '.join(QUALITY)})")
     result = np.zeros_like(image)
-    for part, box in region_classes(regions, mask):
-        crop = (slice(box[0], box[1]), slice(box[2], box[3]))
-        pick = lambda a: None if a is None else a[crop]  # noqa: E731
-        result[crop][part[crop]] = _denoise_part(image[crop], part[crop], pick(albedo), pick(normal), filter,
-                                                 keep_energy, QUALITY[quality], pick(weights))
+    for box, part, network in region_runs(regions, mask):
+        pick = lambda a: None if a is None else a[box]  # noqa: E731
+        if network:
+            result[box][part] = _denoise_part(image[box], part, pick(albedo), pick(normal), filter, keep_energy,
+                                              QUALITY[quality], pick(weights))
+        else:
+            w = None if weights is None or not weights[box][part].sum() > 0 else weights[box][part]
+            result[box][part] = np.average(np.maximum(image[box][part], 0.0), axis=0, weights=w)
     return dilate(result, mask, margin)
 
 
-def region_classes(regions: Optional[np.ndarray], mask: np.ndarray) -> list:
-    """[(texels, (row0, row1, col0, col1))]: the covered texels in classes of regions of which no two
-    touch (8 ways), largest regions first, each with the box it is denoised in (its texels and
-    FILL_RINGS around them). One class, the whole image, without regions or with one."""
-    whole = (0, mask.shape[0], 0, mask.shape[1])
+def region_runs(regions: Optional[np.ndarray], mask: np.ndarray) -> list:
+    """[(box, texels, denoise)]: how one lightmap is denoised, as runs over the (H, W) image's
+    slices `box` (row slice, column slice), each on the texels of its mask `texels` (the box's
+    shape) with OIDN (`denoise`) or as their mean. Without regions, one OIDN run over the whole
+    image. With regions: one OIDN run over the whole image for the largest regions and every region
+    that touches none of them (greedily, largest first), then each other region apart, in the box
+    of its texels and FILL_RINGS round them; a region of fewer than MIN_REGION texels (a sliver by a
+    wall) is too small for the network to see anything in, and takes its mean."""
+    whole = (slice(0, mask.shape[0]), slice(0, mask.shape[1]))
     if regions is None or not mask.any():
-        return [(mask, whole)]
-    label = np.where(mask, regions, -1)
+        return [(whole, mask, True)]
+    label = np.where(mask, regions, -1).astype(np.int64)
     count = int(label.max()) + 1
     if count <= 1:
-        return [(mask, whole)]
-    touch = set()
+        return [(whole, mask, True)]
+    touch = np.zeros(0, np.int64)
     for a, b in ((label[:, :-1], label[:, 1:]), (label[:-1, :], label[1:, :]), (label[:-1, :-1], label[1:, 1:]),
                  (label[:-1, 1:], label[1:, :-1])):
         differ = (a >= 0) & (b >= 0) & (a != b)
-        touch.update(zip(a[differ].tolist(), b[differ].tolist()))
-    near = [set() for _ in range(count)]
-    for a, b in touch:
-        near[a].add(b)
-        near[b].add(a)
-    colour = np.full(count, -1)
-    for r in np.argsort(-np.bincount(label[label >= 0], minlength=count), kind="stable"):
-        used = {colour[o] for o in near[r]}
-        colour[r] = next(c for c in range(count) if c not in used)
-    out = []
-    for c in range(int(colour.max()) + 1):
-        part = mask & (colour[np.maximum(label, 0)] == c)
-        rows, cols = np.flatnonzero(part.any(axis=1)), np.flatnonzero(part.any(axis=0))
-        box = whole if c == 0 else (max(rows[0] - FILL_RINGS, 0), min(rows[-1] + FILL_RINGS + 1, mask.shape[0]),
-                                    max(cols[0] - FILL_RINGS, 0), min(cols[-1] + FILL_RINGS + 1, mask.shape[1]))
-        out.append((part, box))
-    return out
+        touch = np.concatenate([touch, a[differ] * count + b[differ], b[differ] * count + a[differ]])
+    touch = np.unique(touch)
+    near = np.split(touch % count, np.searchsorted(touch // count, np.arange(1, count)))
+    size = np.bincount(label[label >= 0], minlength=count)
+    first = np.zeros(count, bool)
+    taken = np.zeros(count, bool)  # in the first run, or touching it
+    for r in np.argsort(-size, kind="stable"):
+        if not taken[r]:
+            first[r] = taken[r] = True
+            taken[near[r]] = True
+    runs = [(whole, mask & first[np.maximum(label, 0)], True)]
+    h, w = mask.shape
+    for r, (rows, cols) in enumerate(find_objects(label + 1)):
+        if first[r]:
+            continue
+        if size[r] >= MIN_REGION:
+            rows = slice(max(rows.start - FILL_RINGS, 0), min(rows.stop + FILL_RINGS, h))
+            cols = slice(max(cols.start - FILL_RINGS, 0), min(cols.stop + FILL_RINGS, w))
+        runs.append(((rows, cols), label[rows, cols] == r, size[r] >= MIN_REGION))
+    return runs
 
 
 def _denoise_part(image, mask, albedo, normal, filter, keep_energy, quality, weights) -> np.ndarray:

@@ -42,6 +42,7 @@ STANDING = np.cos(np.radians(45.0))  # faces steeper than this against the texel
 GRID = 6  # points a side over the square, for the share on the sample point's side
 MIN_SHARE = 1.0 / (GRID * GRID)
 CHUNK = 1 << 15
+NEIGHBOURS = 3.0  # texel sizes: neighbours in the image further apart than this are not tested (regions)
 
 
 @dataclass
@@ -227,8 +228,8 @@ def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
 def regions(texels: TexelSet, lm, cuts: Cuts, caster, scene) -> np.ndarray:
     """(H, W) int32 image of lightmap `lm`: each covered texel's group of texels that see each other
     along the surface (0, 1, …; −1 in the gutter). Neighbours (8 ways) are linked unless a ray
-    between their sample points, lifted off the surface, is blocked; only texels with a cut can
-    lose a link."""
+    between their sample points, lifted off the surface, is blocked; only texels with a cut, less
+    than NEIGHBOURS texels apart, can lose a link."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -257,7 +258,10 @@ def regions(texels: TexelSet, lm, cuts: Cuts, caster, scene) -> np.ndarray:
         far = length.astype(np.float32)
         blocked = caster.occluded(np.ascontiguousarray(a, np.float32), np.ascontiguousarray(way, np.float32),
                                   far) >= 0
-        keep[test[blocked & (length > 0)]] = False
+        # Neighbours in the image that lie far apart on the surface are two charts side by side in
+        # the atlas: the denoiser has always seen them as one image, and no wall is to blame.
+        near = (length > 0) & (length < NEIGHBOURS * lm.texel_size)
+        keep[test[blocked & near]] = False
     links = pairs[keep]
     graph = coo_matrix((np.ones(len(links), np.int8), (links[:, 0], links[:, 1])), shape=(lm.count, lm.count))
     _, label = connected_components(graph, directed=False)

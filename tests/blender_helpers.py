@@ -62,6 +62,28 @@ def principled(bpy, name, base=(0.8, 0.8, 0.8), emission=(0, 0, 0), strength=0.0
     return mat
 
 
+def lambert(bpy, name, base=(0.8, 0.8, 0.8), emission=(0, 0, 0), strength=0.0):
+    """A Principled BSDF without its specular layer (Specular IOR Level 0, roughness 1): Lambertian in
+    Cycles, which is what the bake models."""
+    mat = principled(bpy, name, base=base, emission=emission, strength=strength)
+    node = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    node.inputs["Roughness"].default_value = 1.0
+    node.inputs["Specular IOR Level"].default_value = 0.0
+    return mat
+
+
+def sky_world(bpy, scene, colour, strength=1.0):
+    """A world of one colour (a Background node) on `scene`."""
+    world = bpy.data.worlds.new("Sky")
+    scene.world = world
+    if world.node_tree is None or bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
+    bg.inputs["Color"].default_value = (*colour, 1.0)
+    bg.inputs["Strength"].default_value = strength
+    return world
+
+
 def relative_rmse(ours, ref, mask):
     a, b = ours[mask], ref[mask]
     return float(np.sqrt(np.mean((a - b) ** 2)) / np.mean(b))

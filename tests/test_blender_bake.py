@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import CORNELL
-from blender_helpers import export, plane_object, principled, relative_rmse, scene_snapshot
+from blender_helpers import export, plane_object, principled, relative_rmse, scene_snapshot, sky_world
 from detp_bake import blender
 from detp_bake.bake import BakeSettings, bake, compute
 from detp_bake.estimators import EstimatorSettings
@@ -88,13 +88,7 @@ def test_emissive_mesh_and_world_match_cycles(empty_blend, bpy, direct):
     """Calibration of the two emitters DESIGN.md says to check: a two-sided emissive plane and a
     constant world colour, against Cycles' direct-light bake of a receiver."""
     scene = empty_blend
-    world = bpy.data.worlds.new("World")
-    scene.world = world
-    if world.node_tree is None or bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
-    bg.inputs["Color"].default_value = (0.1, 0.2, 0.3, 1.0)
-    bg.inputs["Strength"].default_value = 1.0
+    sky_world(bpy, scene, (0.1, 0.2, 0.3))
     recv = plane_object(bpy, "Receiver", 2.0, (0, 0, 0), material=principled(bpy, "Grey", base=(0.5, 0.5, 0.5)))
     plane_object(bpy, "Emitter", 1.0, (0, 0, 1.0), rotation=(np.pi, 0, 0),
                  material=principled(bpy, "Glow", base=(0, 0, 0), emission=(1, 1, 1), strength=2.0))

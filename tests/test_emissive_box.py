@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from blender_helpers import export, plane_object, principled
+from blender_helpers import export, lambert, plane_object
 from detp_bake import blender
 from detp_bake.bake import BakeSettings, compute
 
@@ -18,23 +18,15 @@ FACES = {"+x": (1, 0, 0), "-x (by a wall)": (-1, 0, 0), "+y (by a wall)": (0, 1,
          "top": (0, 0, 1), "bottom (on the floor)": (0, 0, -1)}
 
 
-def _lambert(bpy, name, base, emission=(0, 0, 0), strength=0.0):
-    mat = principled(bpy, name, base=base, emission=emission, strength=strength)
-    node = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
-    node.inputs["Roughness"].default_value = 1.0
-    node.inputs["Specular IOR Level"].default_value = 0.0
-    return mat
-
-
 def test_a_glowing_box_in_a_corner(empty_blend, bpy):
-    grey = _lambert(bpy, "Grey", (0.6, 0.6, 0.6))
+    grey = lambert(bpy, "Grey", (0.6, 0.6, 0.6))
     plane_object(bpy, "Floor", 4.0, (0, 0, 0), material=grey)
     plane_object(bpy, "WallX", 4.0, (-2, 0, 2), rotation=(0, math.pi / 2, 0), material=grey)
     plane_object(bpy, "WallY", 4.0, (0, 2, 2), rotation=(math.pi / 2, 0, 0), material=grey)
     bpy.ops.mesh.primitive_cube_add(size=0.5, location=(-1.6, 1.6, 0.25))
     box = bpy.context.active_object
     box.name = "Glow"
-    box.data.materials.append(_lambert(bpy, "Glow", (0.8, 0.8, 0.8), emission=(1.0, 0.6, 0.3), strength=5.0))
+    box.data.materials.append(lambert(bpy, "Glow", (0.8, 0.8, 0.8), emission=(1.0, 0.6, 0.3), strength=5.0))
     lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
     lamp.data.energy = 100.0
     lamp.location = (1.0, -1.0, 3.0)

@@ -19,7 +19,7 @@ import math
 import numpy as np
 import pytest
 
-from blender_helpers import export
+from blender_helpers import export, lambert, sky_world
 from detp_bake import blender
 from detp_bake.bake import BakeSettings, compute
 from detp_bake.scene import SunLight
@@ -44,18 +44,6 @@ def test_a_leaf_under_a_leaf_is_in_shade():
     print(f"E/S: upper {upper.mean() / 3.0:.3f}, lower {lower.mean() / 3.0:.3f}")
     assert abs(upper.mean() / 3.0 - 1.0) < 0.03
     assert lower.mean() < 0.05 * 3.0
-
-
-def _material(bpy, name, colour):
-    """Principled BSDF without its specular layer (Specular IOR Level 0, roughness 1): Lambertian in
-    Cycles, which is what the bake models."""
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None or bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    node = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
-    for socket, value in (("Base Color", (*colour, 1.0)), ("Roughness", 1.0), ("Specular IOR Level", 0.0)):
-        node.inputs[socket].default_value = value
-    return mat
 
 
 def _mesh_object(bpy, name, verts, faces, material):
@@ -105,21 +93,15 @@ def build_garden(bpy):
     a sun 50° above the horizon and a sky world; 4 diffuse bounces."""
     scene = bpy.context.scene
     _mesh_object(bpy, "Ground", [(-3, -3, 0), (3, -3, 0), (3, 3, 0), (-3, 3, 0)], [(0, 1, 2, 3)],
-                 _material(bpy, "Soil", (0.45, 0.38, 0.30)))
-    _mesh_object(bpy, "Wall", *_box((-1.5, -1.2, 0.0), (1.5, -0.95, 1.8)), _material(bpy, "Stucco", (0.75, 0.7, 0.62)))
-    _mesh_object(bpy, "Crown", *_leaf_cards(), _material(bpy, "Leaf", (0.25, 0.45, 0.15)))
+                 lambert(bpy, "Soil", (0.45, 0.38, 0.30)))
+    _mesh_object(bpy, "Wall", *_box((-1.5, -1.2, 0.0), (1.5, -0.95, 1.8)), lambert(bpy, "Stucco", (0.75, 0.7, 0.62)))
+    _mesh_object(bpy, "Crown", *_leaf_cards(), lambert(bpy, "Leaf", (0.25, 0.45, 0.15)))
     sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
     sun.data.energy = SUN_STRENGTH
     sun.data.angle = math.radians(0.5)
     sun.rotation_euler = (math.radians(40.0), 0.0, math.radians(150.0))  # 50° above the horizon
     scene.collection.objects.link(sun)
-    world = bpy.data.worlds.new("Sky")
-    scene.world = world
-    if world.node_tree is None or bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
-    bg.inputs["Color"].default_value = (*SKY, 1.0)
-    bg.inputs["Strength"].default_value = 1.0
+    sky_world(bpy, scene, SKY)
     scene.cycles.diffuse_bounces = 4
     return scene
 

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from blender_helpers import export, plane_object, principled
+from blender_helpers import export, lambert, plane_object, sky_world
 from detp_bake import blender
 from detp_bake.bake import BakeSettings, compute
 
@@ -23,17 +23,8 @@ LAMP = 400.0  # W, a 1.5 m square area light over the ground: soft light the den
 @pytest.fixture
 def pole_scene(empty_blend, bpy):
     scene = empty_blend
-    world = bpy.data.worlds.new("Sky")
-    scene.world = world
-    if world.node_tree is None or bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
-    bg.inputs["Color"].default_value = (*SKY, 1.0)
-    grey = principled(bpy, "Grey", base=(0.5, 0.5, 0.5))
-    for node in grey.node_tree.nodes:
-        if node.type == "BSDF_PRINCIPLED":
-            node.inputs["Roughness"].default_value = 1.0
-            node.inputs["Specular IOR Level"].default_value = 0.0
+    sky_world(bpy, scene, SKY)
+    grey = lambert(bpy, "Grey", base=(0.5, 0.5, 0.5))
     plane_object(bpy, "Ground", 4.0, (0.0, 0.0, 0.0), material=grey)
     bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.03, 0.0, 1.0))
     pole = bpy.context.active_object

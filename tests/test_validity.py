@@ -141,5 +141,13 @@ def test_regions_keep_the_denoiser_from_crossing_a_wall():
     assert one[:, :32].max() > 0.01
     assert two[:, :32].max() == 0.0
     np.testing.assert_allclose(two[:, 32:].mean(), img[:, 32:].mean(), rtol=1e-4)
-    classes = denoise.region_classes(regions, mask)
-    assert len(classes) == 2 and classes[0][0][:, 32:].all() and not classes[0][0][:, :32].any()
+    runs = denoise.region_runs(regions, mask)
+    assert len(runs) == 2 and runs[0][1][:, 32:].all() and not runs[0][1][:, :32].any()
+    assert runs[1][0] == (slice(0, 64), slice(0, 32 + denoise.FILL_RINGS)) and runs[1][1][:, :32].all()
+    # a sliver under the wall, touching both sides: no run for the network, its mean
+    regions[10:12, 31:33] = 2
+    runs = denoise.region_runs(regions, mask)
+    assert len(runs) == 3 and not runs[2][2] and runs[2][1].sum() == 4
+    kept = denoise.denoise_lightmap(img, mask, margin=0, regions=regions)
+    np.testing.assert_allclose(kept[10:12, 31:33], np.broadcast_to(img[10:12, 31:33].mean(axis=(0, 1)), (2, 2, 3)),
+                               rtol=1e-6)
