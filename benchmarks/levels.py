@@ -208,11 +208,12 @@ def race(bpy, size: int, spps, reference_spp: int, log) -> dict:
 
 def markdown(data) -> str:
     out = [f"Level: one mesh of {data['faces']:,} faces, Smart UV Project, sun and sky; {data['cores']} cores.\n",
-           "| size | texels | photons | rasterise | direct | trace | estimate | denoise | OIDN alone | total | "
-           "peak MB |", "|" + "---|" * 11]
+           "| size | texels | photons | rasterise | validity | direct | trace | estimate | denoise | OIDN alone | "
+           "total | peak MB |", "|" + "---|" * 12]
     for r in data["phases"]:
         s = r["seconds"]
         out.append(f"| {r['size']}² | {r['texels']:,} | {r['photons'] / 1e6:.3g}M | {s.get('rasterise', 0):.1f} | "
+                   f"{s.get('validity', 0):.1f} | "
                    f"{s.get('direct', 0):.1f} | {s.get('trace', 0):.1f} | {s.get('estimate', 0):.1f} | "
                    f"{s.get('denoise', 0):.1f} | {r['oidn_alone']:.1f} | {r['wall']:.1f} | {r['peak_mb']:,.0f} |")
     out.append("\n| size | charts | median width (texels) | border texels | warned |\n|---|---|---|---|---|")

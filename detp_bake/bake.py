@@ -343,12 +343,14 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     t0 = time.perf_counter()
     texels = texels_mod.rasterise(scene)
     caster = RayCaster(scene.positions)
+    t1 = time.perf_counter()
     # Walls and props standing on a texel's square: its sample point and the part that counts (validity.py).
     texels.cuts = validity.find_cuts(texels, scene, caster, settings.threads or os.cpu_count() or 1)
+    validity_seconds = time.perf_counter() - t1
     every = any(estimators.get(name).every_texel for name in names)
     sites = sites_mod.choose(texels, 1 if every else indirect_spacing(settings, frame_state))
     at = sites.texels  # where the estimators run
-    rasterise_seconds = time.perf_counter() - t0
+    rasterise_seconds = time.perf_counter() - t0 - validity_seconds
     # DETP discs reach past a surface's edge by their radius and count what passes there: sun
     # photons must start that far beyond the footprint of the geometry too.
     discs = any(estimators.get(name).discs for name in names)
@@ -468,8 +470,10 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     share = tracer.share
     estimate_progress(0.0)
     # Texels a wall separates are denoised apart (validity.regions), in lightmaps that have cuts.
+    t1 = time.perf_counter()
     regions = {lm.name: validity.regions(texels, lm, texels.cuts, caster, scene) for lm in texels.lightmaps
                if settings.denoise and (texels.cuts.of[lm.texels] >= 0).any()}
+    validity_seconds += time.perf_counter() - t1
     results = {}
     for name in names:
         est = runs[name]
@@ -482,8 +486,8 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
         out.irradiance = sites.expand(out.irradiance)
         value = _value(out, direct_e, share)
         spent[name] += time.perf_counter() - t1
-        seconds = {"rasterise": rasterise_seconds, "direct": direct_info.get("seconds", 0.0),
-                   "clearance": clearance_seconds, "build": build[name], "trace": tracer.stats.seconds,
+        seconds = {"rasterise": rasterise_seconds, "validity": validity_seconds,
+                   "direct": direct_info.get("seconds", 0.0), "clearance": clearance_seconds, "build": build[name], "trace": tracer.stats.seconds,
                    "estimate": spent[name]}
         # An estimate with white noise is denoised apart from the direct light (denoise.py).
         apart = None if direct_e is None or not runs[name].for_denoiser else direct_e

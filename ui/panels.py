@@ -203,7 +203,7 @@ class DETPBAKE_PT_stats(_Panel, bpy.types.Panel):
                            f"{100 * c['border']:.0f} % border")
         if r.get("stopped_by", "photons") != "photons":
             col.label(text=f"Stopped by {r['stopped_by'].replace('_', ' ')}")
-        for phase in ("export", "direct", "build", "trace", "estimate", "denoise", "write"):
+        for phase in ("export", "validity", "direct", "build", "trace", "estimate", "denoise", "write"):
             if phase in r["seconds"]:
                 col.label(text=f"{phase.capitalize()}: {r['seconds'][phase]:.2f} s")
 
