@@ -170,6 +170,16 @@ def _error(images, ref, masks) -> float:
     return float(np.sqrt(np.mean(d ** 2)) / np.mean(b))
 
 
+def time_ratio(row, cycles) -> tuple[float, bool]:
+    """This row's seconds over Cycles + OIDN's at the same error, read off Cycles' (log-log) error
+    curve; past its noisiest point, over that point's time (a lower bound: `beyond` True)."""
+    e = np.log([c["error"] for c in cycles])
+    t = np.log([c["seconds"] for c in cycles])
+    order = np.argsort(e)
+    beyond = row["error"] > max(c["error"] for c in cycles)
+    return row["seconds"] / float(np.exp(np.interp(np.log(row["error"]), e[order], t[order]))), bool(beyond)
+
+
 def race(bpy, size: int, spps, reference_spp: int, log) -> dict:
     from detp_bake.blender import cycles_bake
 
@@ -195,14 +205,9 @@ def race(bpy, size: int, spps, reference_spp: int, log) -> dict:
                      "error": _error(img, ref, masks)})
     cycles = [r for r in rows if r["method"].startswith("Cycles")]
     for row in rows:
-        # Cycles + OIDN's time at this row's error, read off its (log-log) error curve.
-        e = np.log([c["error"] for c in cycles])
-        t = np.log([c["seconds"] for c in cycles])
-        order = np.argsort(-e)
-        at = float(np.exp(np.interp(np.log(row["error"]), e[order], t[order])))
-        row["ratio"] = row["seconds"] / at
+        row["ratio"], row["beyond"] = time_ratio(row, cycles)
         log(f"{row['method']}: {100 * row['error']:.2f} % in {row['seconds']:.1f} s "
-            f"({row['ratio']:.2f} of Cycles + OIDN)")
+            f"({'over ' if row['beyond'] else ''}{row['ratio']:.2f} of Cycles + OIDN's time)")
     return {"size": size, "reference_spp": reference_spp, "rows": rows}
 
 
@@ -226,7 +231,9 @@ def markdown(data) -> str:
         out.append(f"\nRace at {rc['size']}² against Cycles at {rc['reference_spp']} spp:\n")
         out.append("| method | error | seconds | time / Cycles + OIDN's at that error |\n|---|---|---|---|")
         for r in rc["rows"]:
-            out.append(f"| {r['method']} | {100 * r['error']:.2f} % | {r['seconds']:.1f} | {r['ratio']:.2f} |")
+            ratio = f"more than {r['ratio']:.2f} (noisier than Cycles' fewest samples)" if r.get("beyond") \
+                else f"{r['ratio']:.2f}"
+            out.append(f"| {r['method']} | {100 * r['error']:.2f} % | {r['seconds']:.1f} | {ratio} |")
     return "\n".join(out) + "\n"
 
 
