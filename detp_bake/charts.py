@@ -10,6 +10,8 @@ fixes: merged charts at the lightmap's texel density (xatlas), or a higher resol
 from __future__ import annotations
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 NARROW = 4.0  # median chart width (texels) under which a lightmap is called fragmented
 BORDER = 0.5  # ... or this share of border texels
@@ -24,9 +26,6 @@ def _corners(uv: np.ndarray) -> np.ndarray:
 def chart_of_triangles(uv: np.ndarray) -> tuple[int, np.ndarray]:
     """(chart count, (T,) chart of each triangle) for (T, 3, 2) UVs: triangles sharing a UV corner
     are one chart."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     t = len(uv)
     if t == 0:
         return 0, np.zeros(0, np.int64)

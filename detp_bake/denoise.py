@@ -40,7 +40,7 @@ import numpy as np
 from scipy.ndimage import find_objects
 
 from .errors import BakeError
-from .texels import dilate
+from .texels import dilate, neighbour_pairs
 
 FILTERS = ("RT", "RTLightmap")
 # Rings of neighbour-mean extension before the rest of the gutter takes the covered mean. OIDN's
@@ -193,8 +193,7 @@ def region_runs(regions: Optional[np.ndarray], mask: np.ndarray) -> list:
     if count <= 1:
         return [(whole, mask, True)]
     touch = np.zeros(0, np.int64)
-    for a, b in ((label[:, :-1], label[:, 1:]), (label[:-1, :], label[1:, :]), (label[:-1, :-1], label[1:, 1:]),
-                 (label[:-1, 1:], label[1:, :-1])):
+    for a, b in neighbour_pairs(label):
         differ = (a >= 0) & (b >= 0) & (a != b)
         touch = np.concatenate([touch, a[differ] * count + b[differ], b[differ] * count + a[differ]])
     touch = np.unique(touch)

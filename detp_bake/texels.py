@@ -343,6 +343,13 @@ def texel_centres(texels: TexelSet) -> tuple:
     return cx, cy, sx, sy
 
 
+def neighbour_pairs(grid: np.ndarray) -> list:
+    """(a, b) views of a 2D `grid` for its pairs of 8-neighbours, each pair once: right, up and the
+    two diagonals."""
+    return [(grid[:, :-1], grid[:, 1:]), (grid[:-1, :], grid[1:, :]), (grid[:-1, :-1], grid[1:, 1:]),
+            (grid[:-1, 1:], grid[1:, :-1])]
+
+
 def select(texels: TexelSet, mask: np.ndarray) -> TexelSet:
     """The texels where `mask` is set, as a TexelSet of their own: every lightmap keeps its place
     (with the count of its texels kept, maybe 0), so per-lightmap values still broadcast."""

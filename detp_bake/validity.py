@@ -29,10 +29,12 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from .estimators.bvh import discs_meet_triangles
 from .sampling import inline
-from .texels import TexelSet, geometric_normals, pixel_steps, texel_centres
+from .texels import TexelSet, geometric_normals, neighbour_pairs, pixel_steps, texel_centres
 
 DIRECTIONS = 8  # probe rays per texel, in opposite pairs
 LIFT = 0.02  # probe height above the surface, in texel sizes
@@ -230,17 +232,13 @@ def regions(texels: TexelSet, lm, cuts: Cuts, caster, scene) -> np.ndarray:
     along the surface (0, 1, …; −1 in the gutter). Neighbours (8 ways) are linked unless a ray
     between their sample points, lifted off the surface, is blocked; only texels with a cut, less
     than NEIGHBOURS texels apart, can lose a link."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     sl = lm.texels
     grid = np.full(lm.width * lm.height, -1, np.int64)
     grid[texels.pixel[sl]] = np.arange(lm.count)
     grid = grid.reshape(lm.height, lm.width)
     cut = cuts.of[sl] >= 0
     pairs = []
-    for a, b in ((grid[:, :-1], grid[:, 1:]), (grid[:-1, :], grid[1:, :]), (grid[:-1, :-1], grid[1:, 1:]),
-                 (grid[:-1, 1:], grid[1:, :-1])):
+    for a, b in neighbour_pairs(grid):
         ok = (a >= 0) & (b >= 0)
         pairs.append(np.stack([a[ok], b[ok]], axis=1))
     pairs = np.concatenate(pairs)
