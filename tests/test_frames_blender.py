@@ -52,7 +52,7 @@ def test_moving_found_by_evaluation_and_overrides(tmp_path, capsys, bpy):
 @pytest.mark.parametrize("argv, message", [
     (["--frames", "5-1"], "comes before"),
     (["--moving", "Mover"], "need --frames"),
-    (["--frames", "1-2", "--moving", "Nobody"], "'Nobody'"),
+    pytest.param(["--frames", "1-2", "--moving", "Nobody"], "'Nobody'", marks=pytest.mark.blender),  # reads the .blend
     (["--frames", "1-4:2", "--apply"], "a step of 1"),
 ])
 def test_bad_frame_arguments_are_named_before_any_work(tmp_path, capsys, argv, message):
@@ -108,6 +108,7 @@ def test_first_and_a_later_frame_match_cycles(tmp_path, capsys, bpy):
             assert abs(ratio - 1.0) < 0.03, (frame, name, ratio)
 
 
+@pytest.mark.blender  # bakes a .blend through the CLI
 def test_ctrl_c_keeps_the_finished_frames(tmp_path):
     """Ctrl+C during the second frame: exit code 130, the first frame's lightmaps and a report that
     lists it, nothing of the second frame, no hidden temporary file."""

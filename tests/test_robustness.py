@@ -52,6 +52,7 @@ def _older_bake(out):
     return _files(out)
 
 
+@pytest.mark.blender  # bakes a .blend through the CLI
 @pytest.mark.parametrize("sig, phase", [(signal.SIGINT, "trace"), (signal.SIGTERM, "trace"),
                                         (signal.SIGINT, "write")], ids=["sigint-trace", "sigterm-trace", "sigint-write"])
 def test_a_signal_cancels_cleanly_while_tracing_or_writing(tmp_path, sig, phase):
@@ -102,6 +103,7 @@ def test_a_full_disk_leaves_no_partial_file(tmp_path, empty_blend, bpy):
     assert (out / "Floor.texel_histogram.exr").stat().st_size > 2048 and (out / "notes.txt").exists()
 
 
+@pytest.mark.blender  # bakes a .blend through the CLI
 def test_signal_handlers_are_restored_and_an_in_process_cancel_says_so(tmp_path, capsys):
     """`blender -c detp_bake` runs `main` inside Blender: a SIGINT during its bake cancels it, and
     afterwards Blender's own handlers are back."""
@@ -118,6 +120,7 @@ def test_signal_handlers_are_restored_and_an_in_process_cancel_says_so(tmp_path,
     assert _files(tmp_path / "out") == {}
 
 
+@pytest.mark.blender  # bakes a .blend through the CLI
 def test_compare_writes_one_report_with_a_section_per_estimator(tmp_path, capsys):
     out = tmp_path / "c"
     code = main(["compare", str(CORNELL), "--estimators", "photon_map", "disc_index", "--objects", "Floor",
