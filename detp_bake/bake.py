@@ -19,8 +19,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from . import __version__, charts as charts_mod, denoise as denoise_mod, direct as direct_mod, estimators, images, \
-    interrupt, memory, sites as sites_mod, staging, texels as texels_mod, validity
+from . import __version__, charts as charts_mod, denoise as denoise_mod, direct as direct_mod, estimators, \
+    fragments as fragments_mod, images, interrupt, memory, sites as sites_mod, staging, texels as texels_mod, validity
 from .errors import BakeCancelled, BakeError
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
@@ -474,6 +474,10 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
     regions = {lm.name: validity.regions(texels, lm, texels.cuts, caster, scene) for lm in texels.lightmaps
                if settings.denoise and (texels.cuts.of[lm.texels] >= 0).any()}
     validity_seconds += time.perf_counter() - t1
+    # Texels of charts too narrow for OIDN take their neighbours' mean on the surface (fragments.py),
+    # found lightmap by lightmap as each is denoised.
+    fragments_of = partial(fragments_mod.find, texels, scene=scene, caster=caster,
+                           threads=settings.threads or os.cpu_count() or 1) if settings.denoise else None
     results = {}
     for name in names:
         est = runs[name]
@@ -493,7 +497,7 @@ def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_
         apart = None if direct_e is None or not runs[name].for_denoiser else direct_e
         sharp = None if apart is None else sharp_e
         result = _finish(replace(settings, estimator=name), bounces, texels, value, out.counters, tracer, seconds,
-                         direct_info, apart, regions, sharp)
+                         direct_info, apart, regions, sharp, fragments_of)
         result.direct["denoised_apart"] = apart is not None and bool(result.raw_images)
         result.direct["sharp_kept"] = sharp is not None and bool(result.raw_images)
         apart = sharp = None
@@ -713,12 +717,13 @@ def _value(est, direct_e, share) -> np.ndarray:
 
 
 def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_info=None,
-            direct=None, regions=None, sharp=None) -> BakeResult:
+            direct=None, regions=None, sharp=None, fragments_of=None) -> BakeResult:
     """The per-texel E/π `value` as dilated (and denoised) images. `direct`: the direct irradiance E
     in `value`, to be denoised on its own and the rest (the indirect estimate) on its own; `sharp`:
     the part of `direct` from point, spot and sun lights, kept as it is (their shadow rays are exact
     away from penumbrae; docs/real_levels.md). `regions`: {object name: texels that see each other
-    (validity.regions)}, each denoised apart."""
+    (validity.regions)}, each denoised apart. `fragments_of(lm)`: lightmap `lm`'s texels of charts too
+    narrow for OIDN and their neighbours on the surface (fragments.find), smoothed instead."""
     result_images, raw_images, masks, centre_masks = {}, {}, {}, {}
     warnings = []
     denoise = settings.denoise and denoise_mod.available()
@@ -735,8 +740,10 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
         if denoise:
             raw_images[lm.name] = raw
             area, _ = texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)
+            frag = fragments_of(lm) if fragments_of is not None else None
+            counters["fragment_texels"] = counters.get("fragment_texels", 0) + (len(frag) if frag else 0)
             denoised = partial(denoise_mod.denoise_lightmap, mask=mask, margin=settings.margin, weights=area[..., 0],
-                               regions=(regions or {}).get(lm.name))
+                               regions=(regions or {}).get(lm.name), fragments=frag)
             if direct is None:
                 result_images[lm.name] = denoised(img)
             else:

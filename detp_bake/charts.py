@@ -1,6 +1,7 @@
 """UV charts of a lightmap: how many, how wide in texels, how much of the lightmap is chart border.
 
-A chart is a set of UV triangles joined by shared UV corners. Chart borders are where a lightmap is
+A chart is a set of triangles joined by shared corners, a corner shared when both its UV and its
+position agree (charts packed side by side in UV touch, but are not joined). Chart borders are where a lightmap is
 weakest: a border texel covers a sliver of surface (few photons land on it), its neighbours across
 the border belong to other surfaces (the denoiser sees fragments, not an image), and bilinear
 filtering reads the gutter beside it. Smart UV Project on a detailed mesh gives thousands of charts
@@ -17,19 +18,24 @@ NARROW = 4.0  # median chart width (texels) under which a lightmap is called fra
 BORDER = 0.5  # ... or this share of border texels
 
 
-def _corners(uv: np.ndarray) -> np.ndarray:
-    """(T, 3) ids of the triangles' UV corners, equal UVs (to 1e-6 of the square) one id."""
-    key = np.round(np.asarray(uv, np.float64).reshape(-1, 2) * 1e6).astype(np.int64)
-    return np.unique(key, axis=0, return_inverse=True)[1].reshape(-1, 3)
+def _corners(uv: np.ndarray, positions: np.ndarray | None = None) -> np.ndarray:
+    """(T, 3) ids of the triangles' corners: equal UVs (to 1e-6 of the square) and, when given,
+    equal positions (to 1e-6 of the mesh's extent) are one id."""
+    key = np.round(np.asarray(uv, np.float64).reshape(-1, 2) * 1e6)
+    if positions is not None:
+        p = np.asarray(positions, np.float64).reshape(-1, 3)
+        lo = p.min(axis=0)
+        key = np.concatenate([key, np.round((p - lo) / max(float(np.ptp(p)), 1e-300) * 1e6)], axis=1)
+    return np.unique(key.astype(np.int64), axis=0, return_inverse=True)[1].reshape(-1, 3)
 
 
-def chart_of_triangles(uv: np.ndarray) -> tuple[int, np.ndarray]:
-    """(chart count, (T,) chart of each triangle) for (T, 3, 2) UVs: triangles sharing a UV corner
-    are one chart."""
+def chart_of_triangles(uv: np.ndarray, positions: np.ndarray | None = None) -> tuple[int, np.ndarray]:
+    """(chart count, (T,) chart of each triangle) for (T, 3, 2) UVs and, when given, (T, 3, 3)
+    positions: triangles sharing a corner are one chart."""
     t = len(uv)
     if t == 0:
         return 0, np.zeros(0, np.int64)
-    corner = _corners(uv).reshape(-1)
+    corner = _corners(uv, positions).reshape(-1)
     tri = np.repeat(np.arange(t), 3)
     n = t + int(corner.max()) + 1
     graph = coo_matrix((np.ones(3 * t, np.int8), (tri, t + corner)), shape=(n, n))
@@ -39,25 +45,33 @@ def chart_of_triangles(uv: np.ndarray) -> tuple[int, np.ndarray]:
     return int(chart.max()) + 1, chart.reshape(-1)
 
 
-def chart_stats(uv: np.ndarray, res: int, pixel: np.ndarray, texel_tri: np.ndarray) -> tuple[int, float, float]:
-    """(charts, median chart width in texels, share of border texels) of one object's lightmap of
-    `res`² texels: `uv` its (T, 3, 2) UVs, `pixel` its covered texels and `texel_tri` their
-    triangles (indices into `uv`)."""
-    count, chart = chart_of_triangles(uv)
-    if count == 0 or len(pixel) == 0:
-        return count, 0.0, 0.0
+def chart_widths(uv: np.ndarray, positions: np.ndarray, res: int) -> tuple[np.ndarray, np.ndarray]:
+    """((T,) chart of each triangle, (C,) each chart's width in texels at `res`² texels) for one
+    object's (T, 3, 2) UVs and (T, 3, 3) corners. Width: 4·area / perimeter in UV (a square's side,
+    a disc's diameter, twice a thin strip's width)."""
+    count, chart = chart_of_triangles(uv, positions)
     u = np.asarray(uv, np.float64)
     area = 0.5 * np.abs((u[:, 1, 0] - u[:, 0, 0]) * (u[:, 2, 1] - u[:, 0, 1])
                         - (u[:, 1, 1] - u[:, 0, 1]) * (u[:, 2, 0] - u[:, 0, 0]))
-    # Width: 4·area / perimeter (a square's side, a disc's diameter, twice a thin strip's width).
-    corner = _corners(u)
+    corner = _corners(u, positions)
     edges = np.sort(np.stack([corner[:, [0, 1]], corner[:, [1, 2]], corner[:, [2, 0]]], axis=1), axis=2).reshape(-1, 2)
     length = np.linalg.norm(np.stack([u[:, 1] - u[:, 0], u[:, 2] - u[:, 1], u[:, 0] - u[:, 2]], axis=1),
                             axis=2).reshape(-1)
     _, first, times = np.unique(edges, axis=0, return_index=True, return_counts=True)
     outer = first[times == 1]  # an edge no other triangle shares lies on its chart's outline
     perimeter = np.bincount(np.repeat(chart, 3)[outer], weights=length[outer], minlength=count)
-    width = 4.0 * np.bincount(chart, weights=area, minlength=count) / np.maximum(perimeter, 1e-300) * res
+    return chart, 4.0 * np.bincount(chart, weights=area, minlength=count) / np.maximum(perimeter, 1e-300) * res
+
+
+def chart_stats(uv: np.ndarray, positions: np.ndarray, res: int, pixel: np.ndarray,
+                texel_tri: np.ndarray) -> tuple[int, float, float]:
+    """(charts, median chart width in texels, share of border texels) of one object's lightmap of
+    `res`² texels: `uv` its (T, 3, 2) UVs, `positions` its (T, 3, 3) corners, `pixel` its covered
+    texels and `texel_tri` their triangles (indices into `uv`)."""
+    if len(uv) == 0 or len(pixel) == 0:
+        return 0 if len(uv) == 0 else chart_of_triangles(uv, positions)[0], 0.0, 0.0
+    chart, width = chart_widths(uv, positions, res)
+    count = len(width)
     owner = np.full(res * res, -1, np.int64)
     owner[pixel] = chart[texel_tri]
     grid = np.pad(owner.reshape(res, res), 1, constant_values=-1)

@@ -118,7 +118,8 @@ def _check_guide(name: str, guide: Optional[np.ndarray], shape: tuple) -> Option
 def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.ndarray] = None,
                      normal: Optional[np.ndarray] = None, filter: Optional[str] = None,
                      keep_energy: bool = True, margin: int = 16, quality: str = "high",
-                     weights: Optional[np.ndarray] = None, regions: Optional[np.ndarray] = None) -> np.ndarray:
+                     weights: Optional[np.ndarray] = None, regions: Optional[np.ndarray] = None,
+                     fragments=None) -> np.ndarray:
     """Denoise one lightmap and return a new (H, W, 3) float32 image in the same layout.
 
     image: (H, W, 3) irradiance E/π (HDR, ≥ 0), row 0 at the bottom as in texels.py; only the
@@ -142,6 +143,8 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     regions: (H, W) int labels of texels that see each other along the surface (validity.regions):
     no light crosses from one region to a neighbouring one, as regions that touch are denoised in
     different runs (`region_runs`), every texel outside a run being gutter to it.
+    fragments: the texels of charts too narrow for OIDN and their neighbours on the surface
+    (fragments.Fragments): they are gutter to every OIDN run, and take their neighbours' mean.
 
     Raises BakeError for a bad shape or filter, NaN/inf in covered texels, a missing pyoidn, or
     an OIDN failure.
@@ -166,7 +169,15 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     if quality not in QUALITY:
         raise BakeError(f"denoise: unknown quality {quality!r} (choose from {', '.join(QUALITY)})")
     result = np.zeros_like(image)
-    for box, part, network in region_runs(regions, mask):
+    runs_mask = mask
+    if fragments is not None and len(fragments):
+        runs_mask = mask.copy()
+        runs_mask.flat[fragments.pixel] = False
+        covered = _covered("lightmap", image, mask)
+        np.maximum(covered, 0.0, out=covered)
+        result.reshape(-1, 3)[fragments.pixel] = fragments.smooth(covered)
+        del covered
+    for box, part, network in region_runs(regions, runs_mask):
         pick = lambda a: None if a is None else a[box]  # noqa: E731
         if network:
             result[box][part] = _denoise_part(image[box], part, pick(albedo), pick(normal), filter, keep_energy,
@@ -207,9 +218,10 @@ def region_runs(regions: Optional[np.ndarray], mask: np.ndarray) -> list:
             taken[near[r]] = True
     runs = [(whole, mask & first[np.maximum(label, 0)], True)]
     h, w = mask.shape
-    for r, (rows, cols) in enumerate(find_objects(label + 1)):
-        if first[r]:
+    for r, found in enumerate(find_objects(label + 1)):
+        if first[r] or found is None:  # None: a region none of whose texels is in `mask`
             continue
+        rows, cols = found
         if size[r] >= MIN_REGION:
             rows = slice(max(rows.start - FILL_RINGS, 0), min(rows.stop + FILL_RINGS, h))
             cols = slice(max(cols.start - FILL_RINGS, 0), min(cols.stop + FILL_RINGS, w))

@@ -283,7 +283,7 @@ def rasterise(scene: Scene) -> TexelSet:
         held = int(np.count_nonzero(inside))
         overlap = float(np.count_nonzero(inside > 1)) / held if held else 0.0
         outside = max(0.0, 1.0 - within / total) if total > 0 else 0.0
-        stats = charts_mod.chart_stats(uv[sl], res, pixel, best_tri[pixel])
+        stats = charts_mod.chart_stats(uv[sl], scene.positions[sl], res, pixel, best_tri[pixel])
         lightmaps.append(Lightmap(obj.name, index, res, res, offset, len(pixel), texel_size, overlap, outside, *stats))
         parts.append([pos, nrm, tri, pixel, cover[pixel].astype(np.float32), best_d2[pixel] <= 1e-9])
         offset += len(pixel)

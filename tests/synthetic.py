@@ -26,6 +26,24 @@ def grid(size_x: float, size_y: float, n: int, z: float = 0.0, flip: bool = Fals
     return pos, np.broadcast_to(normal, pos.shape).copy(), np.array(uvs, float)
 
 
+def shuffled_charts(size: float, cells: int, seed: int = 3):
+    """grid(size, size, cells) with each cell's two triangles a UV chart of its own: the cells are
+    dealt to the tiles of a cells × cells UV grid in random order, each turned by a random quarter
+    turn, touching its neighbours (no padding), as a fragmented unwrap leaves them."""
+    pos, nrm, uv = grid(size, size, cells)
+    rng = np.random.default_rng(seed)
+    tile = rng.permutation(cells * cells)
+    turns = rng.integers(0, 4, cells * cells)
+    out = np.empty_like(uv)
+    for cell in range(cells * cells):
+        i, j = cell % cells, cell // cells
+        local = uv[2 * cell:2 * cell + 2] * cells - np.array([i, j]) - 0.5  # the cell, centred, side 1
+        for _ in range(turns[cell]):
+            local = np.stack([-local[..., 1], local[..., 0]], axis=-1)
+        out[2 * cell:2 * cell + 2] = (local + 0.5 + np.array([tile[cell] % cells, tile[cell] // cells])) / cells
+    return pos, nrm, out
+
+
 def uv_sphere(radius: float, n_theta: int, n_phi: int, inward: bool = False):
     """A closed sphere; lightmap UVs are the (φ, θ) rectangle, shading normals radial."""
     th = np.linspace(0, np.pi, n_theta + 1)
@@ -100,16 +118,18 @@ def joined(*meshes):
 
 
 def sealed_room(lights, world=(0.0, 0.0, 0.0), resolution=64, ground=16.0, half=1.0, wall=0.06, height=2.5,
-                offset=(0.15, -0.08), bounces=4):
+                offset=(0.15, -0.08), bounces=4, ground_mesh=None):
     """A closed room (walls `wall` thick round a 2·`half` square, a roof; one object "Room", not
     baked) standing on a ground quad `ground` metres wide (object "Ground", baked), moved by `offset`
     off the texel grid: nothing from outside can reach the ground inside. The default offset puts a
     row of texel centres under the south wall nearer its outer face, and a column under the west
-    wall nearer its inner face."""
+    wall nearer its inner face. `ground_mesh`: the ground's (positions, normals, UVs) instead of one
+    chart (a square `ground` metres wide at height 0)."""
     h, t = half, wall
     walls = joined(box((-h - t, -h - t, 0), (h + t, -h, height)), box((-h - t, h, 0), (h + t, h + t, height)),
                    box((-h - t, -h, 0), (-h, h, height)), box((h, -h, 0), (h + t, h, height)),
                    box((-h - t, -h - t, height), (h + t, h + t, height + t)))
     walls = (walls[0] + np.array([offset[0], offset[1], 0.0]), walls[1], walls[2])
-    return make_scene([("Ground", grid(ground, ground, 8), 0.5, True), ("Room", walls, 0.6, False)], lights,
+    ground_mesh = grid(ground, ground, 8) if ground_mesh is None else ground_mesh
+    return make_scene([("Ground", ground_mesh, 0.5, True), ("Room", walls, 0.6, False)], lights,
                       world=world, resolution=resolution, bounces=bounces)

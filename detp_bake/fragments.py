@@ -1,0 +1,116 @@
+"""Texels of charts too narrow for the denoiser, smoothed over their neighbours on the surface.
+
+OIDN sees a lightmap as an image. A UV chart a few texels wide (Smart UV Project on a detailed mesh
+makes thousands) is a scrap of an image to it: its neighbours in the image are other surfaces, and
+its own surface goes on in other charts elsewhere in the atlas. Measured on a plane cut into 16 × 16
+charts of 4 × 4 texels shuffled over the lightmap (tests/test_seams.py: a point light, every photon
+through the texel histogram, 2M photons at 64²): OIDN left 10.6 % error per texel of the raw 11 % and
+raised the mean by 1.4 %, where the same plane as one chart denoised to 2.2 %.
+
+So the texels of a chart narrower than FRAGMENT texels (charts.chart_widths) are left out of OIDN's
+runs and take instead a weighted mean of the values of the NEIGHBOURS texels nearest them in space,
+of any chart of the same lightmap: those facing the same way (shading normals within COS) and seen
+along the surface (a ray between the two, lifted LIFT texels off it, meets nothing: no wall stands
+between; rays are cast only from texels whose lifted disc of reach some triangle crosses), weighted by their area and a Gaussian of SIGMA texels. For the texel histogram this is the
+count of landings over a patch of surface about three texels wide, across the charts' seams. On the
+plane above: 2.8 % error per texel, the mean within 0.3 %.
+"""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .charts import chart_widths
+from .estimators.bvh import discs_meet_triangles
+from .texels import TexelSet, geometric_normals
+
+FRAGMENT = 8.0  # texels: charts narrower than this (charts.py's width) are not denoised as an image
+NEIGHBOURS = 24  # texels in each fragment texel's mean, itself included
+SIGMA = 1.5  # the Gaussian's width, texel sizes; neighbours beyond 3 SIGMA are left out
+COS = 0.9  # shading normals at least this aligned count as one surface
+LIFT = 0.25  # texel sizes: rays between neighbours pass this far above the surface (over a convex curve's chord)
+CHUNK = 1 << 16  # rays per work item
+
+
+@dataclass
+class Fragments:
+    """For one lightmap: its fragment texels (`pixel`, flat indices into its image) and each one's
+    neighbours (`neighbour`, flat pixel indices) with their weights (`weight`, 0 for none)."""
+    pixel: np.ndarray  # (F,) int64
+    neighbour: np.ndarray  # (F, K) int32
+    weight: np.ndarray  # (F, K) float32
+
+    def __len__(self) -> int:
+        return len(self.pixel)
+
+    def smooth(self, image: np.ndarray) -> np.ndarray:
+        """(F, 3) float32: each fragment texel's weighted mean of its neighbours in `image` (H, W, 3)."""
+        flat = image.reshape(-1, image.shape[-1])
+        total = np.einsum("fk,fkc->fc", self.weight, flat[self.neighbour], dtype=np.float64)
+        return (total / self.weight.sum(axis=1, dtype=np.float64)[:, None]).astype(np.float32)
+
+
+def fragment_texels(texels: TexelSet, lm, scene) -> np.ndarray:
+    """Indices (within lightmap `lm`'s texels) of those whose triangle's chart is narrower than
+    FRAGMENT texels."""
+    obj = scene.objects[lm.object_index]
+    sl = obj.triangles
+    chart, width = chart_widths(scene.uvs[sl], scene.positions[sl], lm.width)
+    own = texels.triangle[lm.texels] - obj.first_triangle
+    return np.flatnonzero(width[chart[own]] < FRAGMENT)
+
+
+def _blocked(caster, origin, way, far, threads) -> np.ndarray:
+    """Whether each ray meets anything before `far`, the rays split over `threads`."""
+    out = np.empty(len(origin), bool)
+
+    def run(a):
+        b = min(a + CHUNK, len(origin))
+        out[a:b] = caster.occluded(np.ascontiguousarray(origin[a:b], np.float32),
+                                   np.ascontiguousarray(way[a:b], np.float32),
+                                   np.ascontiguousarray(far[a:b], np.float32)) >= 0
+
+    with ThreadPoolExecutor(max(1, threads)) as pool:
+        list(pool.map(run, range(0, len(origin), CHUNK)))
+    return out
+
+
+def find(texels: TexelSet, lm, scene, caster, threads: int = 1) -> Fragments | None:
+    """The fragments of lightmap `lm` and their neighbours (module docstring), or None when it has
+    none."""
+    local = fragment_texels(texels, lm, scene)
+    if local.size == 0:
+        return None
+    sl = lm.texels
+    pos = texels.position[sl]
+    size = lm.texel_size
+    k = min(NEIGHBOURS, lm.count)
+    dist, near = cKDTree(pos).query(pos[local], k=k, distance_upper_bound=3 * SIGMA * size, workers=max(1, threads))
+    dist, near = dist.reshape(len(local), k), near.reshape(len(local), k)
+    found = near < lm.count
+    near = np.where(found, near, local[:, None])
+    nrm = texels.normal[sl]
+    found &= np.einsum("fc,fkc->fk", nrm[local], nrm[near]) >= COS
+    # A ray from a texel to a neighbour can be blocked only where some triangle crosses the disc of
+    # its reach lifted off the surface: most texels of an open floor need no rays.
+    tri = texels.triangle[sl]
+    g = geometric_normals(scene, tri[local], nrm[local])
+    lifted = pos[local] + LIFT * size * g
+    crossed = discs_meet_triangles(scene.positions, lifted, g, np.full(len(local), 3 * SIGMA * size))
+    other = found & (near != local[:, None]) & crossed[:, None]
+    f, j = np.nonzero(other)
+    if f.size:
+        a = lifted[f]
+        span = pos[near[f, j]] + LIFT * size * geometric_normals(scene, tri[near[f, j]], nrm[near[f, j]]) - a
+        length = np.linalg.norm(span, axis=1)
+        seen = ~_blocked(caster, a, span / np.maximum(length, 1e-300)[:, None], length, threads)
+        found[f, j] = seen
+    area = texels.area[sl]
+    weight = np.where(found, area[near] * np.exp(-0.5 * (np.where(found, dist, 0.0) / (SIGMA * size)) ** 2), 0.0)
+    alone = ~(weight.sum(axis=1) > 0)  # a texel of no area with every neighbour hidden keeps its own value
+    near[alone, 0], weight[alone, 0] = local[alone], 1.0
+    pixel = texels.pixel[sl].astype(np.int64)
+    return Fragments(pixel[local], pixel[near].astype(np.int32), weight.astype(np.float32))
