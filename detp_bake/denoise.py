@@ -29,7 +29,8 @@ L-shaped room 1.65 % RMSE against Cycles instead of 2.24 %, Cornell box 2.54 % a
 
 Limits: the constant extension flattens a gradient at a chart's edge, so border texels come out
 ~0.5–1 % low where irradiance rises towards the edge (10 % noise; unfilled, OIDN pulls them 5–7 %
-towards a 0 gutter). Charts that lie a few texels apart in the atlas are still one image to OIDN.
+towards a 0 gutter). Charts that lie a few texels apart in the atlas are still one image to OIDN;
+charts under 8 texels wide are not denoised here at all but smoothed over the surface (fragments.py).
 """
 from __future__ import annotations
 
