@@ -20,8 +20,10 @@ from typing import Callable, Optional
 import numpy as np
 
 from . import __version__, charts as charts_mod, denoise as denoise_mod, direct as direct_mod, estimators, \
-    fragments as fragments_mod, images, interrupt, memory, sites as sites_mod, staging, texels as texels_mod, validity
+    fragments as fragments_mod, images, interrupt, memory, options, sites as sites_mod, staging, texels as texels_mod, validity
 from .errors import BakeCancelled, BakeError
+from .options import AUTO_PHOTONS, DIRECT_MODES, MAX_BOUNCES, MAX_DIRECT_SAMPLES, MAX_PHOTONS, MAX_RESOLUTION, \
+    MAX_SPACING, PHOTONS_PER_TEXEL, default  # noqa: F401 (the front ends read the limits here too)
 from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
 from .estimators.discs import SLAB, capped_radius, disc_radius
@@ -29,18 +31,11 @@ from .estimators.rise import own_surface_rise, piece_extent, welded_pieces
 from .photons import PhotonBatch, PhotonTracer, RayCaster, TraceStats
 from .scene import Scene
 
-MAX_PHOTONS = 1_000_000_000
+# Ranges and defaults of the settings: options.py (re-exported here for the bake's own messages).
 # Automatic photon count (photons = 0): PHOTONS_PER_TEXEL for each lightmap texel to bake, within
 # AUTO_PHOTONS. At 16 a texel the default (histogram + OIDN) bake of a fully covered lightmap
 # lands about 4-8 indirect photons a texel; tracing costs about 0.4 s a million photons on 2 cores.
-PHOTONS_PER_TEXEL = 16
 RAYS_PER_SECOND = 2.0e6  # photon segments traced a second and thread, for the time a bake announces
-AUTO_PHOTONS = (1_000_000, 64_000_000)
-MAX_RESOLUTION = 16384
-MAX_BOUNCES = 1024
-DIRECT_MODES = ("sampled", "photons")
-MAX_DIRECT_SAMPLES = 4096
-MAX_SPACING = 8
 BLOCKS = 32  # the most blocks of batches a bake is traced in (_blocks)
 # From this many pixels a lightmap's soft direct light (area lights, emissive meshes, the sky) and its
 # indirect light are denoised together: one OIDN run instead of two, where OIDN costs more than the
@@ -51,87 +46,76 @@ ONE_PASS_FROM = 1024 * 1024
 
 @dataclass
 class BakeSettings:
+    """Everything one bake needs to know. The settings a person chooses take their defaults, ranges
+    and help from options.py; build them from what a front end holds with `from_choices`."""
     # texel_histogram: with shadow rays for direct light and OIDN, the best lightmap per second on
     # every scene measured (README, benchmarks/quality.py); disc_index: the best without a denoiser.
-    estimator: str = "texel_histogram"
-    photons: int = 0  # 0: automatic, from the texels to bake (auto_photons)
+    estimator: str = default("estimator")
+    photons: int = default("photons")  # 0: automatic, from the texels to bake (auto_photons)
     # sampled: direct light by shadow rays at every texel, the estimator sees indirect light only;
     # photons: the estimator sees every segment (the paper's experiments).
-    direct: str = "sampled"
-    direct_samples: int = direct_mod.DEFAULT_SAMPLES  # shadow rays per texel and light with extent
-    bounces: Optional[int] = None  # None: the scene's own Cycles diffuse bounces
-    seed: int = 0
-    resolution: int = 128  # default per-object lightmap size (objects may override)
-    margin: int = 16  # dilation, pixels
+    direct: str = default("direct")
+    direct_samples: int = default("direct_samples")  # shadow rays per texel and light with extent
+    bounces: Optional[int] = default("bounces")  # None: the scene's own Cycles diffuse bounces
+    seed: int = default("seed")
+    resolution: int = default("resolution")  # default per-object lightmap size (objects may override)
+    margin: int = default("margin")  # dilation, pixels
     formats: tuple = ("exr",)
     half: bool = False
-    threads: int = 0  # 0: all cores
+    threads: int = default("threads")  # 0: all cores
     batch_size: int = 100_000
-    memory_budget_mb: int = 0  # 0: no limit; the photon map keeps every hit (DETP streams)
+    memory_budget_mb: int = default("memory_budget_mb")  # 0: 80 % of the free memory (check_memory)
     # Stop tracing early (photons is then the most to trace): once every lightmap's relative noise
     # is at most target_noise per cent, or before time_limit seconds of tracing and estimating.
-    target_noise: float = 0.0
-    time_limit: float = 0.0
-    denoise: bool = True  # OIDN on every lightmap (chart-aware; denoise.py), when pyoidn is installed
+    target_noise: float = default("target_noise")
+    time_limit: float = default("time_limit")
+    denoise: bool = default("denoise")  # OIDN on every lightmap (chart-aware; denoise.py), when pyoidn is installed
     keep_raw: bool = False  # also write the lightmaps as they were before denoising (<name>.<estimator>.raw.exr)
     # Texels between the sites where the estimator runs (sites.py), with sampled direct light: 0 is
     # automatic (2 on lightmaps of 256² and more, 1 below); the paper's mode and frame ranges always
     # estimate every texel. The texels between sites blend their neighbouring sites.
-    indirect_spacing: int = 0
+    indirect_spacing: int = default("indirect_spacing")
     estimator_settings: EstimatorSettings = field(default_factory=EstimatorSettings)
+
+    @classmethod
+    def from_choices(cls, choices: dict, **rest) -> "BakeSettings":
+        """Settings from what a front end holds: `choices` maps option names (options.py) to the
+        values the person chose, automatic ones as their `auto` value; `rest` sets other fields
+        (formats, half, keep_raw). Options left out keep their defaults. With automatic photons and
+        a noise target or a time limit, the photons are the most there may be."""
+        core = {name: options.BY_NAME[name].core(value) for name, value in choices.items()}
+        unknown = sorted(set(core) - set(options.BY_NAME))
+        if unknown:
+            raise BakeError(f"unknown setting(s): {', '.join(unknown)}")
+        es = {n: v for n, v in core.items() if options.BY_NAME[n].estimator}
+        bs = {n: v for n, v in core.items() if not options.BY_NAME[n].estimator}
+        if bs.get("photons", cls.photons) == 0 and (bs.get("target_noise") or bs.get("time_limit")):
+            bs["photons"] = MAX_PHOTONS
+        return cls(**bs, **rest, estimator_settings=EstimatorSettings(**es))
 
     def validate(self) -> None:
         """Raise BakeError naming the first setting that cannot work."""
         def bad(setting, value, why):
             raise BakeError(f"setting '{setting}' = {value!r}: {why}")
-        if self.estimator not in estimators.names():
-            bad("estimator", self.estimator, f"choose one of {', '.join(estimators.names())}")
-        if not isinstance(self.photons, (int, np.integer)) or not 0 <= self.photons <= MAX_PHOTONS:
-            bad("photons", self.photons, f"must be 0 (automatic) or between 1 and {MAX_PHOTONS:,}")
-        if self.direct not in DIRECT_MODES:
-            bad("direct", self.direct, f"choose one of {', '.join(DIRECT_MODES)}")
-        if not isinstance(self.direct_samples, (int, np.integer)) or \
-                not 1 <= self.direct_samples <= MAX_DIRECT_SAMPLES:
-            bad("direct_samples", self.direct_samples, f"must be between 1 and {MAX_DIRECT_SAMPLES}")
-        if self.bounces is not None and not 0 <= self.bounces <= MAX_BOUNCES:
-            bad("bounces", self.bounces, f"must be between 0 and {MAX_BOUNCES}")
-        if not 1 <= self.resolution <= MAX_RESOLUTION:
-            bad("resolution", self.resolution, f"must be between 1 and {MAX_RESOLUTION}")
-        if not 0 <= self.margin <= 4096:
-            bad("margin", self.margin, "must be between 0 and 4096 pixels")
+        for opt in options.OPTIONS:
+            value = getattr(self.estimator_settings if opt.estimator else self, opt.name)
+            if isinstance(value, np.integer):
+                value = int(value)
+            why = opt.check(value)
+            if why:
+                bad(opt.name, value, why)
         unknown = [f for f in self.formats if f not in images.WRITERS]
         if unknown or not self.formats:
             bad("formats", self.formats, f"choose from {', '.join(images.WRITERS)}")
-        if not isinstance(self.indirect_spacing, (int, np.integer)) or not 0 <= self.indirect_spacing <= MAX_SPACING:
-            bad("indirect_spacing", self.indirect_spacing, f"must be 0 (automatic) or 1 to {MAX_SPACING} texels")
         if self.indirect_spacing > 1 and self.direct != "sampled":
             bad("indirect_spacing", self.indirect_spacing, "needs direct='sampled': with direct='photons' the estimator "
                 "sees direct light too, whose shadow edges blending between sites would blur")
-        if self.threads < 0:
-            bad("threads", self.threads, "must be 0 (all cores) or more")
         if self.batch_size < 1:
             bad("batch_size", self.batch_size, "must be positive")
-        if not (np.isfinite(self.target_noise) and 0.0 <= self.target_noise <= 100.0):
-            bad("target_noise", self.target_noise, "must be a percentage between 0 (off) and 100")
         fixed = estimators.get(self.estimator).fixed_noise(self.estimator_settings)
         if self.target_noise and fixed is not None:
             bad("target_noise", self.target_noise, f"the {self.estimator} estimator's noise does not fall with "
                 f"more photons (about {100 * fixed:.2g} % whatever the count): use a DETP estimator")
-        if not (np.isfinite(self.time_limit) and self.time_limit >= 0.0):
-            bad("time_limit", self.time_limit, "must be 0 (off) or a number of seconds")
-        if self.memory_budget_mb < 0:
-            bad("memory_budget_mb", self.memory_budget_mb, "must be 0 (no limit) or more")
-        es = self.estimator_settings
-        if es.k < 2:
-            bad("k", es.k, "the photon map needs at least 2 neighbours")
-        if es.radius is not None and not (np.isfinite(es.radius) and es.radius > 0):
-            bad("radius", es.radius, "must be a positive, finite number of metres")
-        if es.radius_texels is not None and not (np.isfinite(es.radius_texels) and es.radius_texels > 0):
-            bad("radius_texels", es.radius_texels, "must be a positive, finite number of texels")
-        if not 0.05 <= es.q <= 0.95:
-            bad("q", es.q, "the sphere cache ratio must lie between 0.05 and 0.95")
-        if es.kernel not in estimators.KERNELS:
-            bad("kernel", es.kernel, f"choose {' or '.join(estimators.KERNELS)}")
 
 
 @dataclass
@@ -288,7 +272,7 @@ def _wide(settings: BakeSettings) -> BakeSettings:
     """The settings with the disc radius in texels set from the direct-light mode when unset."""
     if settings.estimator_settings.radius_texels is not None:
         return settings
-    texels_wide = estimators.RADIUS_TEXELS_INDIRECT if settings.direct == "sampled" else estimators.RADIUS_TEXELS_ALL
+    texels_wide = options.RADIUS_TEXELS_INDIRECT if settings.direct == "sampled" else options.RADIUS_TEXELS_ALL
     return replace(settings, estimator_settings=replace(settings.estimator_settings, radius_texels=texels_wide))
 
 
@@ -863,14 +847,9 @@ def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Cal
             seconds = time.perf_counter() - t0
             for result in results.values():
                 result.seconds["write"] = seconds
-            if frame is not None:
-                pass  # a frame of a range: its report.json is the range's (frames.py)
-            elif summary is None and len(results) == 1:
-                content = next(iter(results.values())).report()
-            else:
-                content = {"version": __version__, **(summary or {}),
-                           "estimators": {name: r.report() for name, r in results.items()}}
-            if frame is None:
+            if frame is None:  # a frame of a range: its report.json is the range's (frames.py)
+                content = next(iter(results.values())).report() if summary is None and len(results) == 1 else \
+                    {"version": __version__, **(summary or {}), "estimators": {n: r.report() for n, r in results.items()}}
                 files.stage_text("report.json", json.dumps(content, indent=2))
             if cancelled():
                 raise BakeCancelled()

@@ -16,12 +16,9 @@ from pathlib import Path
 from dataclasses import replace
 from typing import Optional, Sequence
 
-from . import __version__, bake as bake_mod, estimators, images, interrupt, job as job_mod, output, sites
+from . import __version__, bake as bake_mod, images, interrupt, job as job_mod, options, output
 from .errors import BakeCancelled, BakeError
-from .estimators import KERNELS, EstimatorSettings, compare_defaults, names as estimator_names
-
-# Every default and choice below comes from BakeSettings, EstimatorSettings and the estimator registry.
-_B, _E = bake_mod.BakeSettings, EstimatorSettings
+from .estimators import compare_defaults
 
 
 def build_parser(prog: str = "python -m detp_bake", with_scene_path: bool = True) -> argparse.ArgumentParser:
@@ -43,48 +40,13 @@ def _bake_arguments(b, with_scene_path):
     if with_scene_path:
         b.add_argument("scene", help="the .blend file to bake")
     b.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake (default: all visible meshes)")
-    b.add_argument("--estimator", default=_B.estimator,
-                   help=f"one of: {', '.join(estimator_names())} (default %(default)s)")
-    b.add_argument("--photons", type=int, default=None,
-                   help=f"photons to trace (default: {bake_mod.PHOTONS_PER_TEXEL} per lightmap texel to bake, "
-                        f"{bake_mod._si(bake_mod.AUTO_PHOTONS[0])} to {bake_mod._si(bake_mod.AUTO_PHOTONS[1])}; with "
-                        f"--target-noise or --time-limit, the most to trace, "
-                        f"default {bake_mod._si(bake_mod.MAX_PHOTONS)})")
-    b.add_argument("--target-noise", type=float, default=_B.target_noise, metavar="PERCENT",
-                   help="trace photons in batches until every lightmap's relative noise is at most this")
-    b.add_argument("--time-limit", type=float, default=_B.time_limit, metavar="SECONDS",
-                   help="stop tracing before the bake has run this long (the photons so far stand for all)")
-    b.add_argument("--direct", default=_B.direct, choices=bake_mod.DIRECT_MODES,
-                   help="sampled: direct light by shadow rays, photons carry indirect light only (default); "
-                        "photons: the estimator sees every segment (the paper's experiments)")
-    b.add_argument("--direct-samples", type=int, default=_B.direct_samples,
-                   help="shadow rays per texel for each light with extent (default %(default)s)")
-    b.add_argument("--indirect-spacing", type=int, default=_B.indirect_spacing, metavar="TEXELS",
-                   help="with --direct sampled: estimate indirect light every this many texels and blend between "
-                        f"(0: automatic, {sites.AUTO_SPACING} on lightmaps of {sites.AUTO_FROM}² and more; 1: every texel)")
-    b.add_argument("--k", type=int, default=_E.k, help="photon map neighbours (default %(default)s)")
-    b.add_argument("--radius-texels", type=float, default=_E.radius_texels,
-                   help=f"DETP disc radius in texels (default {estimators.RADIUS_TEXELS_INDIRECT:g} with --direct "
-                        f"sampled, {estimators.RADIUS_TEXELS_ALL:g} with --direct photons)")
-    b.add_argument("--radius", type=float, default=_E.radius, help="DETP disc radius in metres (overrides texels)")
-    b.add_argument("--q", type=float, default=_E.q, help="sphere cache radius ratio (default %(default)s)")
-    b.add_argument("--kernel", default=_E.kernel, choices=KERNELS)
-    b.add_argument("--hybrid-moving", default=_E.hybrid_moving, choices=("sphere_cache", "disc_index"),
-                   help="hybrid: estimator for the moving objects' texels (default %(default)s, the paper's)")
-    b.add_argument("--resolution", type=int, default=_B.resolution, help="lightmap size in pixels (default %(default)s)")
-    b.add_argument("--margin", type=int, default=_B.margin, help="dilation margin in pixels (default %(default)s)")
-    b.add_argument("--bounces", type=int, default=_B.bounces,
-                   help="diffuse bounces (default: the scene's Cycles Light Paths › Diffuse)")
-    b.add_argument("--seed", type=int, default=_B.seed)
-    b.add_argument("--threads", type=int, default=_B.threads, help="0 = all cores")
+    _option_arguments(b)
     b.add_argument("--uv-layer", default=None,
-                   help="lightmap UV layer (default 'Lightmap', created with Lightmap Pack if missing)")
+                   help=f"lightmap UV layer (default '{options.UV_LAYER}', created with Lightmap Pack if missing)")
     b.add_argument("--out", required=True, help="output folder")
-    b.add_argument("--format", default=",".join(_B.formats),
+    b.add_argument("--format", default=",".join(bake_mod.BakeSettings.formats),
                    help=f"comma-separated: {','.join(images.WRITERS)} (default %(default)s)")
     b.add_argument("--half", action="store_true", help="write half-float EXR")
-    b.add_argument("--denoise", action=argparse.BooleanOptionalAction, default=_B.denoise,
-                   help="denoise the lightmaps with OIDN (default on; needs the pyoidn package)")
     b.add_argument("--keep-raw", action="store_true",
                    help="also write each lightmap before denoising, as <object>.<estimator>.raw.exr")
     b.add_argument("--scheduler", default="", metavar="ADDRESS",
@@ -92,8 +54,8 @@ def _bake_arguments(b, with_scene_path):
                         "(needs the dask and distributed packages; README: Baking on a cluster)")
     b.add_argument("--workers", type=int, default=0, metavar="N",
                    help="trace the photons on N worker processes of this machine (a Dask LocalCluster)")
-    b.add_argument("--connect-timeout", type=float, default=10.0, metavar="SECONDS",
-                   help="give up on the scheduler (or its first worker) after this long (default 10)")
+    b.add_argument("--connect-timeout", type=float, default=options.CONNECT_TIMEOUT, metavar="SECONDS",
+                   help="give up on the scheduler (or its first worker) after this long (default %(default)g)")
     b.add_argument("--apply", action="store_true", help="wire the lightmaps into the materials")
     b.add_argument("--frames", default=None, metavar="A-B[:STEP]",
                    help="bake every frame of this range: <object>.<estimator>.<frame:04d>.exr")
@@ -108,23 +70,27 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--json", action="store_true", help="print a JSON summary on stdout instead of the file list")
 
 
+def _option_arguments(b) -> None:
+    """One option per setting of options.py: its default, choices and help from there."""
+    for opt in options.OPTIONS:
+        default = "on" if opt.default else "off"
+        if opt.kind is bool:
+            b.add_argument(opt.flag, action=argparse.BooleanOptionalAction, default=opt.default,
+                           help=f"{opt.help[0].lower()}{opt.help[1:]} (default {default})")
+            continue
+        choices = [c[0] for c in opt.choice_list] or None
+        text = opt.help[0].lower() + opt.help[1:]
+        if choices:
+            text += " (" + "; ".join(f"{v}: {h}" for v, _, h in opt.choice_list) + ")"
+        b.add_argument(opt.flag, type=opt.kind, default=opt.default, choices=choices, metavar=opt.metavar,
+                       help=text.replace("%", "%%") + " (default %(default)s)")
+
+
 def settings_from_args(args) -> bake_mod.BakeSettings:
+    """The bake settings of the parsed command line (BakeSettings.from_choices, as the panel)."""
     formats = tuple(f.strip().lower() for f in args.format.split(",") if f.strip())
-    return bake_mod.BakeSettings(
-        estimator=args.estimator, photons=_photons(args), bounces=args.bounces, seed=args.seed,
-        target_noise=args.target_noise, time_limit=args.time_limit, denoise=args.denoise, keep_raw=args.keep_raw,
-        direct=args.direct, direct_samples=args.direct_samples, indirect_spacing=args.indirect_spacing,
-        resolution=args.resolution, margin=args.margin, formats=formats, half=args.half,
-        threads=args.threads,
-        estimator_settings=EstimatorSettings(k=args.k, radius_texels=args.radius_texels,
-                                             radius=args.radius, q=args.q, kernel=args.kernel,
-                                             hybrid_moving=args.hybrid_moving))
-
-
-def _photons(args) -> int:
-    if args.photons is not None:
-        return args.photons
-    return bake_mod.MAX_PHOTONS if (args.target_noise or args.time_limit) else bake_mod.BakeSettings.photons
+    return bake_mod.BakeSettings.from_choices({o.name: getattr(args, o.name) for o in options.OPTIONS},
+                                              formats=formats, half=args.half, keep_raw=args.keep_raw)
 
 
 class StderrProgress:
@@ -363,7 +329,10 @@ def _cluster(args):
 
 def main(argv: Optional[Sequence[str]] = None, bl_scene=None) -> int:
     parser = build_parser(with_scene_path=bl_scene is None)
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help or --version (0), or a bad option (2) that argparse has named
+        return int(exc.code or 0)
     run = {"bake": run_bake, "compare": run_compare}[args.command]
     with interrupt.cancel_on_signals() as cancel:
         try:

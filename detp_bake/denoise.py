@@ -319,10 +319,3 @@ def _run_filter(color: np.ndarray, filter: str, quality: int, hdr: bool = False,
         flt.release()
     return out
 
-
-def mean_shift(raw: np.ndarray, denoised: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Relative change of each channel's mean over covered texels, (denoised − raw) / raw, for
-    reports: what keep_energy corrects (or, with it off, what OIDN shifted)."""
-    r = raw[mask].mean(axis=0, dtype=np.float64)
-    d = denoised[mask].mean(axis=0, dtype=np.float64)
-    return np.where(r > 0, (d - r) / np.where(r > 0, r, 1.0), 0.0)

@@ -32,8 +32,8 @@ from pathlib import Path
 from typing import Callable, Iterator, Optional
 
 from .errors import BakeCancelled, BakeError
+from .options import CONNECT_TIMEOUT  # seconds to reach the scheduler and see a worker
 
-CONNECT_TIMEOUT = 10.0  # seconds to reach the scheduler and see a worker
 UNITS_PER_SLOT = 3  # units per worker thread: small enough to balance, large enough to amortise
 MAX_UNIT_BATCHES = 16  # batches in a unit: a few seconds of one core
 EARLY_STOP_UNIT_BATCHES = 4  # for bakes that may stop early (noise target, time limit): little traced in vain

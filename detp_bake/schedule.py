@@ -79,9 +79,3 @@ class BatchSchedule:
                 e.emit(self.key, lo, hi - lo, n / weight, origins[rows], dirs[rows], flux[rows],
                        rng[rows] if len(rng) else rng)
             a += int(n)
-
-    def photons_of(self, index: int, start: int, stop: int):
-        """Photons [start, stop) of batch `index` as float64 (origins, directions, flux)."""
-        out = [np.empty((stop - start, 3)) for _ in range(3)]
-        self.emit(index, start, stop, *out, np.empty(0, np.uint64))
-        return tuple(out)

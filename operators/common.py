@@ -2,9 +2,8 @@
 and a Blender scene exported for the core."""
 import bpy
 
-from ..detp_bake import blender, memory, texels
+from ..detp_bake import blender, memory, options, texels
 from ..detp_bake.bake import BakeSettings
-from ..detp_bake.estimators import EstimatorSettings
 
 
 def preferences(context):
@@ -24,20 +23,21 @@ def cluster(context):
 
 
 def bake_settings(context, estimator=None) -> BakeSettings:
+    """The bake settings of the scene's properties (BakeSettings.from_choices, as the command line);
+    what only the panel has: threads and the memory budget fall back on the preferences, the disc
+    radius is in texels or in metres (radius_mode), spacing applies with shadow rays only."""
     s = context.scene.detp_bake
     prefs = preferences(context)
-    threads = s.threads or (prefs.threads if prefs is not None else 0)
-    return BakeSettings(
-        estimator=estimator or s.estimator, photons=s.photons, bounces=None if s.bounces < 0 else s.bounces,
-        direct=s.direct, direct_samples=s.direct_samples, indirect_spacing=s.indirect_spacing if s.direct == "sampled" else 0,
-        denoise=s.denoise,
-        target_noise=s.target_noise, time_limit=s.time_limit,
-        seed=s.seed, resolution=s.resolution, margin=s.margin,
-        formats=tuple(f.lower() for f in sorted(s.formats)) or ("exr",), threads=threads,
-        memory_budget_mb=prefs.memory_budget if prefs is not None else 0,
-        estimator_settings=EstimatorSettings(
-            k=s.k, q=s.q, radius_texels=s.radius_texels,
-            radius=s.radius if s.radius_mode == "WORLD" else None, hybrid_moving=s.hybrid_moving))
+    choices = {o.name: getattr(s, o.name) for o in options.OPTIONS if hasattr(s, o.name)}
+    choices["threads"] = s.threads or (prefs.threads if prefs is not None else 0)
+    choices["memory_budget_mb"] = prefs.memory_budget if prefs is not None else options.default("memory_budget_mb")
+    if estimator:
+        choices["estimator"] = estimator
+    if s.radius_mode != "WORLD":
+        choices["radius"] = options.BY_NAME["radius"].auto
+    if s.direct != "sampled":
+        choices["indirect_spacing"] = options.BY_NAME["indirect_spacing"].auto
+    return BakeSettings.from_choices(choices, formats=tuple(f.lower() for f in sorted(s.formats)) or ("exr",))
 
 
 def output_directory(context) -> str:

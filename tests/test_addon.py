@@ -375,3 +375,38 @@ def test_live_preview_refines_the_materials_images_and_esc_restores_the_scene(ad
     assert json.loads(cornell.detp_bake.last_report)["photons"] == traced[-1]
     assert "detp_bake preview Floor" not in bpy.data.images  # the applied lightmap replaced it
     assert bpy.ops.detp_bake.revert() == {"FINISHED"}
+
+
+CHOICES = [
+    {},  # the defaults
+    {"estimator": "disc_index", "photons": 250_000, "direct": "photons", "bounces": 2, "radius_texels": 0.0,
+     "seed": 7, "resolution": 64, "margin": 4, "k": 300, "q": 0.7, "denoise": False},
+    {"estimator": "hybrid", "hybrid_moving": "disc_index", "target_noise": 2.0, "time_limit": 30.0,
+     "direct_samples": 64, "indirect_spacing": 2, "radius_texels": 2.5, "kernel": "epanechnikov", "threads": 2},
+]
+
+
+@pytest.mark.parametrize("choices", CHOICES)
+def test_the_panel_and_the_command_line_build_the_same_settings(addon, cornell, bpy, choices):
+    """The same choices made in the panel (scene properties) and on the command line give equal
+    BakeSettings, and every default is the core's own (options.py)."""
+    from detp_bake import cli, options
+    from detp_bake.bake import BakeSettings
+
+    common = sys.modules[f"{PACKAGE}.operators.common"]
+    s = bpy.context.scene.detp_bake
+    for name, value in choices.items():
+        setattr(s, name, value)
+    panel = common.bake_settings(bpy.context)
+    argv = ["bake", "x.blend", "--out", "o"]
+    for name, value in choices.items():
+        opt = options.BY_NAME[name]
+        argv += [opt.flag if value else "--no-" + name] if opt.kind is bool else [opt.flag, str(value)]
+    line = cli.settings_from_args(cli.build_parser().parse_args(argv))
+    assert panel == line
+    if not choices:
+        assert panel == BakeSettings() and panel.estimator_settings.radius_texels is None
+    # Every setting is on the panel, but the memory budget, which is a preference of the machine.
+    assert {o.name for o in options.OPTIONS if not hasattr(s, o.name)} == {"memory_budget_mb"}
+    for name in choices:  # reset for the next case
+        s.property_unset(name)

@@ -143,7 +143,7 @@ def test_the_preferences_button_reports_the_workers_and_their_cores(cluster, bpy
         said = capfd.readouterr()
         assert f"{cluster.address}: 2 workers, 2 cores" in said.out + said.err, said
         prefs.scheduler_address = "tcp://127.0.0.1:9"
-        monkeypatch.setattr(sys.modules["detp_bake_addon.ui.preferences"], "CONNECT_TIMEOUT", 1.0)
+        monkeypatch.setattr(sys.modules["detp_bake.options"], "CONNECT_TIMEOUT", 1.0)
         with pytest.raises(RuntimeError, match="could not reach the scheduler at tcp://127.0.0.1:9"):
             bpy.ops.detp_bake.test_cluster()
     finally:

@@ -1,10 +1,12 @@
 """The DETP slab's measure of a texel's own surface (estimators/rise.py): flat pieces get none,
 curved ones what their curvature needs, and another piece in front counts for nothing."""
+from types import SimpleNamespace
+
 import numpy as np
 
 from detp_bake.estimators import EstimatorSettings
 from detp_bake.estimators.discs import CLEARANCE_FLOOR, make_discs
-from detp_bake.estimators.rise import mesh_pieces, own_surface_rise, piece_extent
+from detp_bake.estimators.rise import own_surface_rise, piece_extent, welded_pieces
 from detp_bake.scene import PointLight
 from detp_bake.texels import rasterise
 from synthetic import grid, make_scene, uv_sphere
@@ -15,8 +17,10 @@ LAMP = [PointLight("Lamp", np.zeros(3), np.full(3, 1.0))]
 def test_pieces_are_the_welded_components():
     a = grid(1.0, 1.0, 3)[0]
     b = grid(1.0, 1.0, 2, z=0.005)[0]
-    both = np.concatenate([a, b]).astype(np.float32)
-    label = mesh_pieces(both)
+    both = np.concatenate([a, b])
+    scene = make_scene([("Both", (both, np.zeros_like(both), np.zeros(both.shape[:2] + (2,))), 0.5, True)], LAMP)
+    one_lightmap = SimpleNamespace(lightmaps=[SimpleNamespace(object_index=0)])  # all welded_pieces reads
+    label = welded_pieces(one_lightmap, scene)[0][0]
     assert len(set(label[:len(a)])) == 1 and len(set(label[len(a):])) == 1
     assert label[0] != label[-1]
 

@@ -92,6 +92,7 @@ class DETPBAKE_PT_estimator(_Panel, bpy.types.Panel):
             return
         layout.prop(s, "radius_mode")
         layout.prop(s, "radius_texels" if s.radius_mode == "TEXELS" else "radius")
+        layout.prop(s, "kernel")
         if s.estimator == "sphere_cache" or (s.estimator == "hybrid" and s.hybrid_moving == "sphere_cache"):
             layout.prop(s, "q")
         if s.estimator == "hybrid":

@@ -4,7 +4,9 @@ import os
 import bpy
 from bpy.props import IntProperty, StringProperty
 
-CONNECT_TIMEOUT = 5.0  # seconds: the button waits this long at most
+from ..detp_bake import options
+
+_BUDGET = options.BY_NAME["memory_budget_mb"]
 
 
 def _remember_cache_directory(self, context):
@@ -22,9 +24,8 @@ class DETPBakePreferences(bpy.types.AddonPreferences):
 
     threads: IntProperty(name="Threads", default=0, min=0, max=1024,
                          description="Threads for tracing and estimation when the scene says 0 (0: all cores)")
-    memory_budget: IntProperty(name="Photon Memory (MB)", default=4096, min=0, soft_max=65536,
-                               description="Refuse bakes whose stored photons would need more memory than this "
-                                           "(the photon map keeps every hit; DETP estimators stream). 0: no limit")
+    memory_budget: IntProperty(name=_BUDGET.label, default=_BUDGET.default, min=_BUDGET.minimum,
+                               soft_max=_BUDGET.soft_maximum, description=_BUDGET.help)
     cache_directory: StringProperty(name="Kernel Cache", default="", subtype="DIR_PATH",
                                     description="Folder for compiled kernels (empty: the extension's user folder). "
                                                 "Takes effect at the next start of Blender",
@@ -56,7 +57,7 @@ class DETPBAKE_OT_test_cluster(bpy.types.Operator):
             self.report({"ERROR"}, "set the Dask scheduler address first")
             return {"CANCELLED"}
         try:
-            with Cluster(address, timeout=CONNECT_TIMEOUT) as cluster:
+            with Cluster(address, timeout=options.CONNECT_TIMEOUT) as cluster:
                 info = cluster.describe()
         except BakeError as exc:
             self.report({"ERROR"}, str(exc))

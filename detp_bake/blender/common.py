@@ -4,9 +4,11 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
+from ..options import UV_LAYER
+
 FRAME_NAME = "detp_bake lightmap"
 REVERT_KEY = "detp_bake_revert"
-DEFAULT_UV = "Lightmap"
+DEFAULT_UV = UV_LAYER
 DEFAULT_ALBEDO = (0.8, 0.8, 0.8)
 
 
@@ -15,14 +17,6 @@ def _has_nodes(idblock) -> bool:
     if idblock.node_tree is None:
         return False
     return bpy.app.version >= (5, 0, 0) or bool(idblock.use_nodes)
-
-
-def _socket(node, *names):
-    for name in names:
-        sock = node.inputs.get(name)
-        if sock is not None:
-            return sock
-    return None
 
 
 def _rgb(sock) -> np.ndarray:

@@ -18,28 +18,25 @@ from typing import Callable, Optional
 import numpy as np
 
 from ..errors import BakeError
+from ..options import KERNELS, RADIUS_TEXELS_ALL, RADIUS_TEXELS_INDIRECT, default  # noqa: F401 (re-exported)
 from ..photons import PhotonBatch
 from ..texels import TexelSet
 
 
 @dataclass
 class EstimatorSettings:
-    k: int = 100  # photon map: neighbours
+    """The estimators' settings; defaults, ranges and help in options.py."""
+    k: int = default("k")  # photon map: neighbours
     normal_agreement: float = 0.8  # photon map: min cos between hit and texel normals
-    # DETP family: disc radius in texels of each lightmap. None: 3 when the discs see indirect light
-    # only (it is smooth: wider discs, less noise; best at equal time, benchmarks/quality.py), 1.5 when
-    # they see every segment (the paper's mode, where discs blur hard shadows).
-    radius_texels: Optional[float] = None
-    radius: Optional[float] = None  # DETP family: disc radius in metres (overrides texels)
-    q: float = 0.65  # sphere cache: ratio of successive sphere radii
-    kernel: str = "constant"  # DETP family: constant or epanechnikov
+    # DETP family: disc radius in texels of each lightmap (None: options.RADIUS_TEXELS_INDIRECT or
+    # RADIUS_TEXELS_ALL, bake.with_disc_radius), or in metres (overrides texels)
+    radius_texels: Optional[float] = default("radius_texels")
+    radius: Optional[float] = default("radius")
+    q: float = default("q")  # sphere cache: ratio of successive sphere radii
+    kernel: str = default("kernel")  # DETP family: constant or epanechnikov
     # hybrid: the moving objects' texels by sphere_cache (the paper's choice) or by a disc index of
     # their own, rebuilt every frame (measured faster here: benchmarks/frames.py)
-    hybrid_moving: str = "sphere_cache"
-
-
-RADIUS_TEXELS_INDIRECT = 3.0
-RADIUS_TEXELS_ALL = 1.5
+    hybrid_moving: str = default("hybrid_moving")
 
 
 @dataclass
@@ -71,9 +68,6 @@ class FrameState:
 class Estimate:
     irradiance: np.ndarray  # (N, 3) float64, W/m²
     counters: dict = field(default_factory=dict)
-
-
-KERNELS = ("constant", "epanechnikov")
 
 
 class Estimator:

@@ -22,12 +22,6 @@ from ..texels import TexelSet
 SMALL_PIECE = 64  # vertices: a piece this small is measured from its vertices when texels are too few
 
 
-def mesh_pieces(positions: np.ndarray) -> np.ndarray:
-    """Connected piece of every triangle of `positions` (T, 3, 3): triangles that share a vertex
-    position (exactly, as Blender's shared vertices do after one transform) are one piece."""
-    return _welded(positions)[0]
-
-
 def _welded(positions: np.ndarray):
     """(piece per triangle, the welded vertices (V, 3) float64, piece per vertex)."""
     t = len(positions)

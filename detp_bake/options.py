@@ -1,0 +1,175 @@
+"""Every bake setting a person chooses, declared once: its default, range, choices, help and label.
+
+The command line (cli.py) makes its options from this list, the panel (ui/properties.py) its
+properties, BakeSettings and EstimatorSettings take their defaults from it and `check` its ranges,
+and both front ends turn what the person chose into settings through one function
+(`BakeSettings.from_choices`), so the panel and the command line cannot drift apart.
+
+A setting that may be automatic has an `auto` value (0 or −1) that both front ends show for it; the
+core reads it as None where its field is Optional (bounces, disc radii).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Optional
+
+from . import sites
+
+MAX_PHOTONS = 1_000_000_000
+PHOTONS_PER_TEXEL = 16  # automatic photon count: this many per lightmap texel to bake ...
+AUTO_PHOTONS = (1_000_000, 64_000_000)  # ... within these
+MAX_RESOLUTION = 16384
+MAX_BOUNCES = 1024
+MAX_DIRECT_SAMPLES = 4096
+MAX_SPACING = 8
+MAX_MARGIN = 4096
+CONNECT_TIMEOUT = 10.0  # seconds to wait for a Dask scheduler and its first worker
+UV_LAYER = "Lightmap"  # the lightmap UV layer's default name
+DIRECT_MODES = ("sampled", "photons")
+# DETP disc radius in texels when not set: wide where the discs see indirect light only (it is smooth:
+# wider discs, less noise; best at equal time, benchmarks/quality.py), narrow where they see every
+# segment (the paper's mode, where discs blur hard shadows).
+RADIUS_TEXELS_INDIRECT = 3.0
+RADIUS_TEXELS_ALL = 1.5
+KERNELS = ("constant", "epanechnikov")
+
+
+@dataclass(frozen=True)
+class Option:
+    """One setting. `name` is its field in BakeSettings (EstimatorSettings when `estimator`);
+    `kind` int, float, bool or str; `choices` ((value, label, help), …) for a choice (or a function
+    that returns them, for the estimator registry, read when asked); `auto` the value
+    that means automatic (None where there is none); `flag` the command line's option; `unit` how
+    the panel shows a number (NONE, PERCENTAGE, TIME, LENGTH)."""
+    name: str
+    kind: type
+    default: Any
+    label: str
+    help: str
+    minimum: Optional[float] = None
+    maximum: Optional[float] = None
+    soft_maximum: Optional[float] = None
+    choices: tuple = ()
+    auto: Any = None
+    estimator: bool = False
+    unit: str = "NONE"
+    metavar: Optional[str] = None
+
+    @property
+    def choice_list(self) -> tuple:
+        return tuple(self.choices()) if callable(self.choices) else self.choices
+
+    @property
+    def flag(self) -> str:
+        return "--" + self.name.replace("_", "-")
+
+    def core(self, value):
+        """The value the core reads for what a front end holds: None for the automatic value of an
+        Optional field, a float to seven significant digits."""
+        if self.auto is not None and value == self.auto and self.name in OPTIONAL:
+            return None
+        if self.kind is float and isinstance(value, float):
+            # Blender keeps a float property in single precision (0.65 reads 0.6499999761581421):
+            # seven digits give the panel and the command line the same number.
+            return float(f"{value:.7g}")
+        return value
+
+    def check(self, value) -> Optional[str]:
+        """Why `value` (as the core reads it) cannot work, or None."""
+        if value is None and self.name in OPTIONAL:
+            return None
+        if self.choices:
+            names = [c[0] for c in self.choice_list]
+            return None if value in names else f"choose one of {', '.join(names)}"
+        if self.kind is int and not (isinstance(value, int) and not isinstance(value, bool)):
+            return "must be a whole number"
+        if self.kind in (int, float):
+            try:
+                ok = float(value) == float(value) and abs(float(value)) != float("inf")
+            except (TypeError, ValueError):
+                ok = False
+            low = self.minimum if self.auto is None or self.name in OPTIONAL else min(self.minimum, self.auto)
+            if not ok or (low is not None and value < low) or (self.maximum is not None and value > self.maximum):
+                return "must be " + self.range_text()
+        return None
+
+    def range_text(self) -> str:
+        def num(v):
+            return f"{int(v):,}" if self.kind is int else f"{v:g}"
+        auto = f"{num(self.auto)} (automatic) or " if self.auto is not None and self.name not in OPTIONAL else ""
+        if self.maximum is None:
+            return f"{auto}at least {num(self.minimum)}"
+        return f"{auto}between {num(self.minimum)} and {num(self.maximum)}"
+
+
+def _estimators():
+    from . import estimators  # the registry imports this module for its defaults
+    return tuple((n, estimators.get(n).label, estimators.get(n).description) for n in estimators.names())
+
+
+# Fields whose automatic value the core holds as None.
+OPTIONAL = ("bounces", "radius_texels", "radius")
+
+OPTIONS = (
+    Option("estimator", str, "texel_histogram", "Estimator", "Density estimator that turns photons into irradiance",
+           choices=_estimators),
+    Option("photons", int, 0, "Photons", "Photons traced from the lights: more means less noise; 0: automatic, "
+           f"{PHOTONS_PER_TEXEL} per lightmap texel to bake ({AUTO_PHOTONS[0]:,} to {AUTO_PHOTONS[1]:,}); with a noise "
+           f"target or a time limit the most to trace ({MAX_PHOTONS:,} when automatic)",
+           minimum=1, maximum=MAX_PHOTONS, soft_maximum=50_000_000, auto=0),
+    Option("direct", str, "sampled", "Direct Light", "How direct light is found",
+           choices=(("sampled", "Shadow Rays", "Direct light sampled with shadow rays at every texel; photons carry "
+                     "indirect light only (sharp shadows, least noise)"),
+                    ("photons", "Photons", "Photons carry direct light too and the estimator sees every segment "
+                     "(the paper's experiments)"))),
+    Option("direct_samples", int, 16, "Shadow Rays", "Shadow rays per texel for each light with extent (area, "
+           "sphere, sun disc, sky, emissive meshes); point lights need one",
+           minimum=1, maximum=MAX_DIRECT_SAMPLES, soft_maximum=256),
+    Option("indirect_spacing", int, 0, "Indirect Spacing", "With shadow rays for direct light: estimate indirect "
+           f"light every this many texels and blend between them (0: automatic, {sites.AUTO_SPACING} on lightmaps "
+           f"of {sites.AUTO_FROM}² and more; 1: every texel)", minimum=1, maximum=MAX_SPACING, auto=0,
+           metavar="TEXELS"),
+    Option("target_noise", float, 0.0, "Noise Target", "Stop tracing once every lightmap's relative noise is at most "
+           "this many per cent (0: off); Photons is then the most to trace", minimum=0.0, maximum=100.0,
+           soft_maximum=10.0, unit="PERCENTAGE", metavar="PERCENT"),
+    Option("time_limit", float, 0.0, "Time Limit", "Stop tracing before the bake has run this many seconds (0: off)",
+           minimum=0.0, soft_maximum=3600.0, unit="TIME", metavar="SECONDS"),
+    Option("denoise", bool, True, "Denoise", "Denoise the lightmaps with Intel Open Image Denoise (chart-aware; "
+           "needs the pyoidn package)"),
+    Option("bounces", int, -1, "Bounces", "Diffuse bounces before a photon lands (-1: the scene's Cycles Light "
+           "Paths › Diffuse)", minimum=0, maximum=MAX_BOUNCES, soft_maximum=16, auto=-1),
+    Option("seed", int, 0, "Seed", "Random seed: the same seed gives the same lightmaps", minimum=0),
+    Option("resolution", int, 128, "Resolution", "Lightmap width and height in pixels",
+           minimum=1, maximum=MAX_RESOLUTION, soft_maximum=4096),
+    Option("margin", int, 16, "Margin", "Pixels of dilation around the UV charts, against seams under filtering",
+           minimum=0, maximum=MAX_MARGIN),
+    Option("threads", int, 0, "Threads", "Threads for tracing and estimation (0: all cores)", minimum=0,
+           maximum=1024),
+    Option("memory_budget_mb", int, 0, "Memory Budget (MB)", "Refuse bakes whose peak memory, estimated before "
+           "any work, would pass this many megabytes (0: 80 % of the memory free when the bake starts)",
+           minimum=0, soft_maximum=65536, metavar="MB"),
+    Option("k", int, 100, "Neighbours", "Photon map: hits per estimate; noise is about 1/sqrt(k)",
+           minimum=2, soft_maximum=5000, estimator=True),
+    Option("radius_texels", float, 0.0, "Radius", "DETP disc radius in texels of each lightmap (0: automatic, "
+           f"{RADIUS_TEXELS_INDIRECT:g} with shadow rays for direct light, {RADIUS_TEXELS_ALL:g} "
+           "when the discs see every segment): larger is smoother but blurrier",
+           minimum=1e-3, soft_maximum=8.0, auto=0.0, estimator=True, metavar="TEXELS"),
+    Option("radius", float, 0.0, "Radius", "DETP disc radius in metres (0: in texels instead; overrides the texels)",
+           minimum=1e-6, auto=0.0, estimator=True, unit="LENGTH", metavar="METRES"),
+    Option("q", float, 0.65, "Sphere Ratio", "Sphere cache: radius ratio of successive spheres (best near 0.6-0.7)",
+           minimum=0.05, maximum=0.95, estimator=True),
+    Option("kernel", str, "constant", "Kernel", "DETP family: the disc's kernel",
+           choices=tuple((k, k.title(), f"{k.title()} kernel over the disc") for k in KERNELS),
+           estimator=True),
+    Option("hybrid_moving", str, "sphere_cache", "Moving Texels", "Hybrid: how the moving objects' texels are "
+           "estimated", choices=(("sphere_cache", "Sphere Cache", "The paper's choice"),
+                                 ("disc_index", "Disc Index", "A small index of their own, built every frame")),
+           estimator=True),
+)
+BY_NAME = {o.name: o for o in OPTIONS}
+
+
+def default(name: str):
+    """The core's default of setting `name` (None for an automatic Optional one)."""
+    o = BY_NAME[name]
+    return o.core(o.default)
