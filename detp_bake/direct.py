@@ -472,8 +472,7 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     squares = texel_squares(texels)
     uvs = np.ascontiguousarray(scene.uvs, np.float32)
     positions = np.ascontiguousarray(scene.positions, np.float32)
-    centre, radius = scene.bounds()
-    eps = max(1e-5 * radius, 1e-6)
+    eps = scene.ray_offset()
     srf = surfaces(scene)
     empty_cdf = np.zeros(1)
     empty_tri = np.zeros((1, 3, 3))
@@ -567,5 +566,12 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     else:
         for i in range(len(chunks)):
             run(i)
+    cuts = getattr(texels, "cuts", None)
+    if cuts is not None and cuts.covered is not None:
+        # Against another face's front (a box's bottom on the floor): a ray leaving such a point
+        # would start behind that face, and no light reaches it (validity.covered).
+        out[cuts.covered] = 0.0
+        if sharp is not None:
+            sharp[cuts.covered] = 0.0
     return out, {"lights": len(lights), "samples": int(samples), "rays": int(sum(rays)), "shared": len(shared),
                  "seconds": time.perf_counter() - t0}

@@ -30,9 +30,9 @@ BATCH_SETS = 3  # record sets alive at once (photons._ArrayPool.KEEP)
 # Measured with benchmarks/memory.py (2048², a 5 % gutter): a disc_index bake needed about 500
 # bytes a texel before issue 10's cuts, about 300 after; the figures here are 1.1 times the
 # measured peaks, so the estimate stays above them when every pixel is a texel.
-# Since texel validity (validity.py): its cut index and moved flag (5), the sharp lights' part of
-# the direct light (12) and the region labels (4).
-TEXEL_BYTES = 61 + 2 * 12 + 5 + 12 + 4
+# Since texel validity (validity.py): its cut index and moved and covered flags (6), the sharp
+# lights' part of the direct light (12) and the region labels (4).
+TEXEL_BYTES = 61 + 2 * 12 + 6 + 12 + 4
 PIXEL_BYTES = 3 * 12 + 2  # raw, denoised and dilated float32 RGB, two masks
 # Denoising, one lightmap at a time: OIDN's scratch, bounded by denoise.MAX_MEMORY_MB (about 560
 # bytes a pixel below that), and the float32 images the denoiser works on beside it.

@@ -178,6 +178,10 @@ class Scene:
         radius = float(np.linalg.norm(hi - lo)) * 0.5
         return centre, max(radius, 1e-3) * 1.01
 
+    def ray_offset(self) -> float:
+        """How far off a surface rays leave it (shadow rays, photon bounces): 1e-5 of the scene's size."""
+        return max(1e-5 * self.bounds()[1], 1e-6)
+
     def recentred(self) -> tuple["Scene", np.ndarray]:
         """(a copy moved so that the centre of its geometry's box is the origin, the offset
         subtracted), or (self, zeros) when the origin already lies within the geometry's bounding

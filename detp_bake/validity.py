@@ -15,8 +15,15 @@ its surface (LIFT texel sizes above it, as far as its square reaches):
 - the nearest face met (after the move, the face it moved across) cuts the texel's square along a
   line, and only the side of the sample point counts: direct light's shadow rays start there
   (texel_area.area_point), photon landings on the other side are left out and the texel's area is
-  the share on its side (texel histogram).
+  the area of surface on its side (texel histogram): of every triangle in its square, clipped to
+  the square and to the cut lines' planes, as the landings are tested (`_near_areas`).
 One cut a texel: in a corner where two walls cross one square, the nearer one.
+
+A texel whose point lies against the front of another face (a box's bottom face standing on the
+floor: the two faces coincide, back to back) is `covered`: no light reaches it, and Cycles' bake,
+whose shadow rays skip only the point's own triangle and meet the floor at once, reads 0 there. A
+shadow ray that starts a small offset off the surface would start under the floor instead and see
+the sky below it (direct.py gives covered texels no direct light).
 
 The denoiser must not carry light across a wall either. `regions` splits each lightmap's texels
 into groups that see each other along the surface: neighbouring texels are linked unless a ray
@@ -28,21 +35,21 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .estimators.bvh import discs_meet_triangles
+from .estimators.bvh import discs_meet_triangles, faces_against
 from .sampling import inline
-from .texels import TexelSet, geometric_normals, neighbour_pairs, pixel_steps, texel_centres
+from .texels import TexelSet, geometric_normals, neighbour_pairs, pixel_steps
 
 DIRECTIONS = 8  # probe rays per texel, in opposite pairs
 LIFT = 0.02  # probe height above the surface, in texel sizes
 REACH = 0.75  # probe length, in texel sizes: past the half-diagonal of the square (0.707)
 PUSH = 0.05  # how far past the face a moved sample point lands, in texel sizes
 STANDING = np.cos(np.radians(45.0))  # faces steeper than this against the texel's surface stand on it
-GRID = 6  # points a side over the square, for the share on the sample point's side
-MIN_SHARE = 1.0 / (GRID * GRID)
+MIN_SHARE = 1.0 / 36  # the least share of its square's area a cut texel keeps
 CHUNK = 1 << 15
 NEIGHBOURS = 3.0  # texel sizes: neighbours in the image further apart than this are not tested (regions)
 
@@ -57,13 +64,16 @@ class Cuts:
     normal: np.ndarray  # (C, 2, 3) float64
     share: np.ndarray  # (C,) float64, MIN_SHARE … 1
     moved: np.ndarray = None  # (N,) bool: the texel's centre lay inside a solid and was moved out
+    covered: np.ndarray = None  # (N,) bool: the texel's point lies against the front of another face
 
     @classmethod
     def none(cls, n: int) -> "Cuts":
-        return cls(np.full(n, -1, np.int32), np.zeros((0, 2, 3)), np.zeros((0, 2, 3)), np.zeros(0), np.zeros(n, bool))
+        return cls(np.full(n, -1, np.int32), np.zeros((0, 2, 3)), np.zeros((0, 2, 3)), np.zeros(0), np.zeros(n, bool),
+                   np.zeros(n, bool))
 
     def select(self, mask: np.ndarray) -> "Cuts":
-        return Cuts(self.of[mask], self.point, self.normal, self.share, self.moved[mask])
+        return Cuts(self.of[mask], self.point, self.normal, self.share, self.moved[mask],
+                    None if self.covered is None else self.covered[mask])
 
     def kernel_arrays(self) -> tuple:
         """(of, point, normal) for the compiled kernels: at least one row each, so numba sees arrays."""
@@ -161,24 +171,114 @@ def _cut_chunk(caster, pos, g, size):
     return new_pos, inside & has, has, np.stack([point, point2], axis=1), np.stack([m, m2], axis=1)
 
 
-def _shares(points, normals, uv, corners, cx, cy):
-    """The share of each texel's surface that lies on its side of its cut lines: of a GRID² grid of
-    points over its square (centre `cx, cy` in pixels; its triangle's `uv` in pixels and world
-    `corners`), those on its triangle; all of them (the triangle's plane) where none is."""
-    f = (np.arange(GRID) + 0.5) / GRID - 0.5
-    fu, fv = (a.reshape(1, -1) for a in np.meshgrid(f, f))
-    x, y = cx[:, None] + fu, cy[:, None] + fv
-    (ax, ay), (bx, by), (ex, ey) = ((uv[:, k, 0, None], uv[:, k, 1, None]) for k in range(3))
-    den = (by - ey) * (ax - ex) + (ex - bx) * (ay - ey)
-    den = np.where(np.abs(den) > 1e-30, den, 1e-30)
-    l0 = ((by - ey) * (x - ex) + (ex - bx) * (y - ey)) / den
-    l1 = ((ey - ay) * (x - ex) + (ax - ex) * (y - ey)) / den
-    l2 = 1.0 - l0 - l1
-    world = sum(l[..., None] * corners[:, None, k] for k, l in enumerate((l0, l1, l2)))
-    near = (np.einsum("nlpc,nlc->nlp", world[:, None] - points[:, :, None], normals) >= 0.0).all(axis=1)
-    on = (l0 >= 0.0) & (l1 >= 0.0) & (l2 >= 0.0)
-    on[~on.any(axis=1)] = True
-    return np.maximum((near & on).sum(axis=1) / on.sum(axis=1), MIN_SHARE)
+@numba.njit(cache=True)
+def _clip(xs, ys, fs, n, bx, by):
+    """Clip the convex polygon (xs, ys)[:n] to where the affine function with vertex values fs is
+    at least 0, in place (bx, by: scratch); returns its new vertex count."""
+    m = 0
+    for a in range(n):
+        b = (a + 1) % n
+        if fs[a] >= 0.0:
+            bx[m], by[m] = xs[a], ys[a]
+            m += 1
+        if (fs[a] >= 0.0) != (fs[b] >= 0.0):
+            f = fs[a] / (fs[a] - fs[b])
+            bx[m], by[m] = xs[a] + f * (xs[b] - xs[a]), ys[a] + f * (ys[b] - ys[a])
+            m += 1
+    for a in range(m):
+        xs[a], ys[a] = bx[a], by[a]
+    return m
+
+
+@numba.njit(cache=True)
+def _near_areas(uv, positions, world_area, width, height, texel_of, cut_of, cut_p, cut_n, out):
+    """out[c] += the world area of the triangles (UVs `uv` in 0..1, world `positions`) inside the
+    square of the texel with cut c (`texel_of` a pixel's texel, −1 for none) on that texel's side of
+    both its cut lines: what the texel histogram's landings are tested against (on_side)."""
+    xs, ys, fs = np.empty(16), np.empty(16), np.empty(16)
+    bx, by = np.empty(16), np.empty(16)
+    for t in range(uv.shape[0]):
+        ax, ay = uv[t, 0, 0] * width, uv[t, 0, 1] * height
+        ex, ey = uv[t, 1, 0] * width, uv[t, 1, 1] * height
+        gx, gy = uv[t, 2, 0] * width, uv[t, 2, 1] * height
+        den = (ey - gy) * (ax - gx) + (gx - ex) * (ay - gy)
+        if abs(den) <= 1e-12:
+            continue
+        scale = world_area[t] / (0.5 * abs(den))
+        i0 = max(0, int(np.floor(min(ax, min(ex, gx)))))
+        i1 = min(width - 1, int(np.floor(max(ax, max(ex, gx)))))
+        j0 = max(0, int(np.floor(min(ay, min(ey, gy)))))
+        j1 = min(height - 1, int(np.floor(max(ay, max(ey, gy)))))
+        for j in range(j0, j1 + 1):
+            for i in range(i0, i1 + 1):
+                k = texel_of[j * width + i]
+                if k < 0 or cut_of[k] < 0:
+                    continue
+                c = cut_of[k]
+                xs[0], xs[1], xs[2] = ax, ex, gx
+                ys[0], ys[1], ys[2] = ay, ey, gy
+                n = 3
+                for edge in range(6):  # the square's four sides, then the two cut lines
+                    for a in range(n):
+                        if edge == 0:
+                            fs[a] = xs[a] - i
+                        elif edge == 1:
+                            fs[a] = i + 1.0 - xs[a]
+                        elif edge == 2:
+                            fs[a] = ys[a] - j
+                        elif edge == 3:
+                            fs[a] = j + 1.0 - ys[a]
+                        else:
+                            line = edge - 4
+                            l0 = ((ey - gy) * (xs[a] - gx) + (gx - ex) * (ys[a] - gy)) / den
+                            l1 = ((gy - ay) * (xs[a] - gx) + (ax - gx) * (ys[a] - gy)) / den
+                            l2 = 1.0 - l0 - l1
+                            f = 0.0
+                            for q in range(3):
+                                p = l0 * positions[t, 0, q] + l1 * positions[t, 1, q] + l2 * positions[t, 2, q]
+                                f += (p - cut_p[c, line, q]) * cut_n[c, line, q]
+                            fs[a] = f
+                    n = _clip(xs, ys, fs, n, bx, by)
+                    if n < 3:
+                        break
+                if n < 3:
+                    continue
+                area = 0.0
+                for a in range(n):
+                    b = (a + 1) % n
+                    area += xs[a] * ys[b] - xs[b] * ys[a]
+                out[c] += scale * 0.5 * abs(area)
+
+
+def _shares(texels: TexelSet, scene, cuts: Cuts) -> np.ndarray:
+    """Per cut, the share of its texel's area (all surface in its square) on the texel's side of its
+    cut lines, at least MIN_SHARE."""
+    near = np.zeros(len(cuts.share))
+    _, cut_p, cut_n = cuts.kernel_arrays()
+    world_area = 0.5 * np.linalg.norm(np.cross(scene.positions[:, 1] - scene.positions[:, 0],
+                                               scene.positions[:, 2] - scene.positions[:, 0]), axis=1)
+    for lm in texels.lightmaps:
+        sl = scene.objects[lm.object_index].triangles
+        texel_of = np.full(lm.width * lm.height, -1, np.int64)
+        texel_of[texels.pixel[lm.texels]] = np.arange(lm.offset, lm.offset + lm.count)
+        _near_areas(np.ascontiguousarray(scene.uvs[sl], np.float64), np.ascontiguousarray(scene.positions[sl], np.float64),
+                    np.ascontiguousarray(world_area[sl], np.float64), lm.width, lm.height, texel_of,
+                    np.ascontiguousarray(cuts.of), cut_p, cut_n, near)
+    owner = np.empty(len(near), np.int64)
+    owner[cuts.of[cuts.of >= 0]] = np.flatnonzero(cuts.of >= 0)
+    return np.clip(near / np.maximum(texels.area[owner].astype(np.float64), 1e-300), MIN_SHARE, 1.0)
+
+
+def covered(texels: TexelSet, scene, g: np.ndarray) -> np.ndarray:
+    """Per texel, whether the front of another face lies against its point (geometric normal `g`),
+    within twice the shadow rays' offset in front of it (direct.py)."""
+    p = scene.positions.astype(np.float64)
+    facing = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    facing /= np.maximum(np.linalg.norm(facing, axis=1, keepdims=True), 1e-300)
+    shading = scene.normals.astype(np.float64).sum(axis=1)
+    facing[np.einsum("ij,ij->i", facing, shading) < 0.0] *= -1.0
+    reach = np.full(len(texels), 2.0 * scene.ray_offset())
+    return faces_against(p, facing, texels.position, g, texels.triangle, reach)
 
 
 def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
@@ -194,36 +294,27 @@ def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
     g = geometric_normals(scene, texels.triangle, texels.normal)
     near = discs_meet_triangles(scene.positions, texels.position + (LIFT * size)[:, None] * g, g, REACH * size)
     todo = np.flatnonzero(near & (size > 0))
-    if todo.size == 0:
-        return cuts
-    chunks = [todo[a:a + CHUNK] for a in range(0, todo.size, CHUNK)]
-
-    cx, cy, sx, sy = texel_centres(texels)
-    uvs = scene.uvs.astype(np.float64)
-
-    def run(idx):
-        found = _cut_chunk(caster, texels.position[idx], g[idx], size[idx])
-        tri = texels.triangle[idx]
-        uv = uvs[tri] * np.stack([sx[idx], sy[idx]], axis=1).astype(np.float64)[:, None, :]
-        share = _shares(found[3], found[4], uv, scene.positions[tri].astype(np.float64), cx[idx], cy[idx])
-        return idx, (*found, share)
-
-    with ThreadPoolExecutor(max(1, int(threads))) as pool:
-        done = list(pool.map(run, chunks))
-    points, normals, shares = [], [], []
-    rows = 0
-    for idx, (new_pos, inside, has, point, m, share) in done:
-        texels.position[idx] = new_pos
-        cuts.moved[idx] = inside
-        cut = idx[has]
-        cuts.of[cut] = rows + np.arange(cut.size, dtype=np.int32)
-        rows += cut.size
-        points.append(point[has])
-        normals.append(m[has])
-        shares.append(share[has])
-    cuts.point = np.concatenate(points)
-    cuts.normal = np.concatenate(normals)
-    cuts.share = np.concatenate(shares)
+    if todo.size:
+        chunks = [todo[a:a + CHUNK] for a in range(0, todo.size, CHUNK)]
+        with ThreadPoolExecutor(max(1, int(threads))) as pool:
+            done = list(pool.map(lambda idx: (idx, _cut_chunk(caster, texels.position[idx], g[idx], size[idx])),
+                                 chunks))
+        points, normals = [], []
+        rows = 0
+        for idx, (new_pos, inside, has, point, m) in done:
+            texels.position[idx] = new_pos
+            cuts.moved[idx] = inside
+            cut = idx[has]
+            cuts.of[cut] = rows + np.arange(cut.size, dtype=np.int32)
+            rows += cut.size
+            points.append(point[has])
+            normals.append(m[has])
+        cuts.point = np.concatenate(points)
+        cuts.normal = np.concatenate(normals)
+        cuts.share = np.ones(rows)
+        if rows:
+            cuts.share = _shares(texels, scene, cuts)
+    cuts.covered = covered(texels, scene, g)
     return cuts
 
 

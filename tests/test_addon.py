@@ -96,11 +96,12 @@ class RecordingLayout:
 
 
 def test_every_panel_draws_existing_properties_and_operators(addon, cornell, bpy):
+    from detp_bake import estimators
     from detp_bake_addon.ui import panels
     bpy.context.view_layer.objects.active = cornell.objects["Floor"]
     s = cornell.detp_bake
     seen = set()
-    for estimator in ("disc_index", "sphere_cache", "photon_map"):
+    for estimator in estimators.names():  # the default (texel_histogram) and every other one
         for mode in ("FIXED", "DENSITY"):
             s.estimator, s.resolution_mode, s.radius_mode = estimator, mode, "WORLD" if mode == "DENSITY" else "TEXELS"
             s.last_report = "" if estimator == "disc_index" else json.dumps(
@@ -116,7 +117,10 @@ def test_every_panel_draws_existing_properties_and_operators(addon, cornell, bpy
                 seen |= {entry[1] for entry in log}
     assert {"detp_bake.bake", "detp_bake.apply", "detp_bake.revert", "detp_bake.unwrap", "detp_bake.compare",
             "detp_bake.compare_clear", "detp_bake.open_image", "photons", "radius_texels", "radius", "k", "q",
-            "texel_density", "uv_layer", "include"} <= seen
+            "kernel", "hybrid_moving", "texel_density", "uv_layer", "include"} <= seen
+    # Every bake setting of options.py but the machine's memory budget (a preference) is on a panel.
+    from detp_bake import options
+    assert {o.name for o in options.OPTIONS} - seen == {"memory_budget_mb"}
 
 
 def _small(scene, out, **extra):

@@ -26,16 +26,19 @@ def test_full_square_chart_covers_every_texel_at_its_centre():
 
 def test_partly_covered_texels_are_kept_and_clamped_onto_the_surface():
     sc = _plane_scene(16, n=1)
-    sc.uvs = 0.1 + 0.8 * sc.uvs  # the chart's edges now cut texels in half... or less
+    sc.uvs = 0.1 + 0.8 * sc.uvs  # the chart spans texel coordinates [1.6, 14.4]: its edges cut texels
     tx = texels.rasterise(sc)
-    lo, hi = 0.1 * 16, 0.9 * 16  # chart spans texel coords [1.6, 14.4]
     i, j = tx.pixel % 16, tx.pixel // 16
     assert i.min() == 1 and i.max() == 14 and j.min() == 1 and j.max() == 14
-    # Coverage areas add up to the plane's area exactly; border texels count only their share.
+    # Coverage areas add up to the plane's area exactly; border texels count only their share: 0.4
+    # of a whole texel along an edge (from 1.6 to 2), 0.16 in a corner.
+    side = 2.0 / (0.8 * 16)  # a whole texel's width on the 2 m plane
     assert np.isclose(tx.area.sum(), 4.0)
-    assert tx.area.min() < 0.5 * tx.area.max()
+    edge = (i == 1) & (j > 1) & (j < 14)
+    np.testing.assert_allclose(tx.area[edge], 0.4 * side * side, rtol=1e-5)
+    np.testing.assert_allclose(tx.area[(i == 1) & (j == 1)], 0.16 * side * side, rtol=1e-5)
+    np.testing.assert_allclose(tx.area[(i > 1) & (i < 14) & (j > 1) & (j < 14)], side * side, rtol=1e-5)
     assert np.abs(tx.position[:, :2]).max() <= 1.0 + 1e-12  # never off the plane
-    assert int(np.floor(lo)) == 1 and int(np.floor(hi)) == 14
 
 
 def test_dilation_fills_the_gutter_with_neighbour_means():

@@ -32,6 +32,7 @@ CONE_NONE = 2.0  # a threshold no unit direction reaches: the node's discs face 
 # Row layout of `node`: box lo (0-2), box hi (3-5), cone axis (6-8), cone threshold (9).
 LO, HI, AXIS, CONE = 0, 3, 6, 9
 STACK_DEPTH = 256  # a walk holds at most depth + 1 nodes; radix splits of 63-bit codes go < 100 deep
+AGAINST = 0.99  # faces_against: two faces within 8° of back to back touch face to face
 
 
 @dataclass
@@ -425,6 +426,18 @@ def _discs_meet(tri, tri_lo, tri_hi, order, node, left, first, count, origin, no
                     break
 
 
+def _triangle_tree(tri: np.ndarray) -> tuple:
+    """The radix tree over triangle boxes: (lo, hi, order, left, first, count, node)."""
+    lo, hi = tri.min(axis=1), tri.max(axis=1)
+    codes = morton_codes(0.5 * (lo + hi))
+    order = np.argsort(codes)
+    left, first, count, _, _ = _topology(codes[order], LEAF_SIZE, np.arange(len(tri) + 1))
+    node = np.zeros((len(left), 10), np.float32)
+    _box_leaves(lo, hi, order, left, first, count, node)
+    _box_inner(left, node)
+    return lo, hi, order, left, first, count, node
+
+
 def discs_meet_triangles(positions: np.ndarray, origin: np.ndarray, normal: np.ndarray,
                          reach: np.ndarray) -> np.ndarray:
     """Per disc (origin, unit normal, radius `reach`): whether some triangle (T, 3, 3) may cross it.
@@ -433,13 +446,87 @@ def discs_meet_triangles(positions: np.ndarray, origin: np.ndarray, normal: np.n
     out = np.zeros(len(origin), np.bool_)
     if len(tri) == 0 or len(origin) == 0:
         return out
-    lo, hi = tri.min(axis=1), tri.max(axis=1)
-    codes = morton_codes(0.5 * (lo + hi))
-    order = np.argsort(codes)
-    left, first, count, _, _ = _topology(codes[order], LEAF_SIZE, np.arange(len(tri) + 1))
-    node = np.zeros((len(left), 10), np.float32)
-    _box_leaves(lo, hi, order, left, first, count, node)
-    _box_inner(left, node)
+    lo, hi, order, left, first, count, node = _triangle_tree(tri)
     _discs_meet(tri, lo, hi, order, node, left, first, count, np.ascontiguousarray(origin, np.float64),
                 np.ascontiguousarray(normal, np.float64), np.ascontiguousarray(reach, np.float64), out)
+    return out
+
+
+@numba.njit(cache=True, parallel=True)
+def _against(tri, facing, tri_lo, tri_hi, order, node, left, first, count, point, normal, own, reach, out):
+    """out[i]: a triangle other than own[i], its front (`facing`) turned back to normal[i] (within
+    AGAINST), crosses the segment from point[i] − pad·normal[i] to point[i] + reach[i]·normal[i]
+    (pad as _discs_meet)."""
+    for i in numba.prange(point.shape[0]):
+        pad = 1e-5 * (reach[i] + max(abs(point[i, 0]), max(abs(point[i, 1]), abs(point[i, 2]))))
+        lo = np.empty(3)
+        hi = np.empty(3)
+        for c in range(3):
+            a, b = point[i, c] - pad * normal[i, c], point[i, c] + reach[i] * normal[i, c]
+            lo[c], hi[c] = min(a, b) - pad, max(a, b) + pad
+        stack = np.empty(STACK_DEPTH, np.int32)
+        stack[0] = 0
+        sp = 1
+        while sp > 0 and not out[i]:
+            sp -= 1
+            k = stack[sp]
+            if (lo[0] > node[k, HI] or hi[0] < node[k, LO] or lo[1] > node[k, HI + 1] or hi[1] < node[k, LO + 1]
+                    or lo[2] > node[k, HI + 2] or hi[2] < node[k, LO + 2]):
+                continue
+            if left[k] >= 0:
+                stack[sp], stack[sp + 1] = left[k], left[k] + 1
+                sp += 2
+                continue
+            for p in range(first[k], first[k] + count[k]):
+                t = order[p]
+                if t == own[i] or (lo[0] > tri_hi[t, 0] or hi[0] < tri_lo[t, 0] or lo[1] > tri_hi[t, 1]
+                                   or hi[1] < tri_lo[t, 1] or lo[2] > tri_hi[t, 2] or hi[2] < tri_lo[t, 2]):
+                    continue
+                cos = facing[t, 0] * normal[i, 0] + facing[t, 1] * normal[i, 1] + facing[t, 2] * normal[i, 2]
+                if cos > -AGAINST:
+                    continue  # not face to face: an edge touching it, or its own surface, a decal on it
+                # Where the segment meets the triangle's plane, and whether that point lies on it.
+                s = 0.0
+                for c in range(3):
+                    s += (tri[t, 0, c] - point[i, c]) * facing[t, c]
+                s /= cos
+                if s < -pad or s > reach[i]:
+                    continue
+                q = np.empty(3)
+                for c in range(3):
+                    q[c] = point[i, c] + s * normal[i, c]
+                inside = True
+                for e in range(3):
+                    a, b = tri[t, e], tri[t, (e + 1) % 3]
+                    # The edge's inward side, in the plane: (b − a) × facing points inwards for CCW.
+                    ex, ey, ez = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+                    ix = ey * facing[t, 2] - ez * facing[t, 1]
+                    iy = ez * facing[t, 0] - ex * facing[t, 2]
+                    iz = ex * facing[t, 1] - ey * facing[t, 0]
+                    third = tri[t, (e + 2) % 3]
+                    side = (third[0] - a[0]) * ix + (third[1] - a[1]) * iy + (third[2] - a[2]) * iz
+                    here = (q[0] - a[0]) * ix + (q[1] - a[1]) * iy + (q[2] - a[2]) * iz
+                    length = np.sqrt(ix * ix + iy * iy + iz * iz)
+                    if here * np.sign(side) < -pad * length:
+                        inside = False
+                        break
+                if inside:
+                    out[i] = True
+                    break
+
+
+def faces_against(positions: np.ndarray, facing: np.ndarray, point: np.ndarray, normal: np.ndarray,
+                  own: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """Per point (on triangle `own`, unit `normal` its front): whether the front of another triangle
+    (unit `facing` normals, per triangle) lies face to face against it, crossing the normal within
+    `reach` in front of the point (or a float's width behind it): a box's bottom face standing on a
+    floor is covered so, and so is the floor under it, and the end faces of two boxes put end to end."""
+    tri = np.ascontiguousarray(positions, np.float64)
+    out = np.zeros(len(point), np.bool_)
+    if len(tri) == 0 or len(point) == 0:
+        return out
+    lo, hi, order, left, first, count, node = _triangle_tree(tri)
+    _against(tri, np.ascontiguousarray(facing, np.float64), lo, hi, order, node, left, first, count,
+             np.ascontiguousarray(point, np.float64), np.ascontiguousarray(normal, np.float64),
+             np.ascontiguousarray(own, np.int64), np.ascontiguousarray(reach, np.float64), out)
     return out
