@@ -1,6 +1,6 @@
 # Two Blender LTS lines, one virtual environment each (see requirements/).
 #   make demo   - set up .venv (Blender 4.5 line) and bake the Cornell box headless
-#   make test   - set up both environments and run the suite on both lines
+#   make test   - set up the environments and run the suite on both lines (4.5: without bpy, then the rest)
 #   make test-core - the core suite in an environment without bpy (Blender tests skip, one reason)
 SHELL := /bin/bash
 find_python = $(shell for p in $$(command -v $(1) 2>/dev/null) $$(ls -d $$(pyenv root 2>/dev/null)/versions/$(2)*/bin/$(1) 2>/dev/null | sort -V -r); do "$$p" -c 'import sys' >/dev/null 2>&1 && { echo "$$p"; break; }; done)
@@ -16,7 +16,7 @@ PYTEST_ARGS ?=
 CORE_HASH := $(shell cat $$(find detp_bake -name '*.py' | sort) | cksum | cut -d' ' -f1)
 DEMO_OUT ?= build/demo
 
-.PHONY: demo test test-4.5 test-5.2 test-core test-core-smoke bench bench-full clean env
+.PHONY: demo test test-4.5 test-4.5-blender test-5.2 test-core bench bench-full clean env
 
 $(VENV45)/.installed: requirements/blender-4.5.txt
 	@test -n "$(PY311)" || { echo "error: Python 3.11 not found (needed for the Blender 4.5 LTS line)"; exit 1; }
@@ -39,16 +39,11 @@ $(VENVCORE)/.installed: requirements/blender-4.5.txt
 	$(VENVCORE)/bin/python -m pip install -q -r $(VENVCORE)/requirements.txt
 	touch $@
 
+# It writes the tests it skipped for want of bpy to NEEDS_BLENDER (tests/conftest.py).
+NEEDS_BLENDER := .cache/needs-blender.txt
 test-core: $(VENVCORE)/.installed
-	NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-core-$(CORE_HASH) $(VENVCORE)/bin/python -m pytest tests -rs $(PYTEST_ARGS)
-
-# What CI runs of it (the full core suite already runs on both lines): every test module is
-# collected without bpy (Blender ones skip, not error) and a quick core module passes (under a minute
-# on 2 cores with the environment built: the kernels it needs compile cold).
-test-core-smoke: $(VENVCORE)/.installed
-	NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-core-$(CORE_HASH) $(VENVCORE)/bin/python -m pytest tests -q --co -p no:cacheprovider >/dev/null
-	NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-core-$(CORE_HASH) $(VENVCORE)/bin/python -m pytest tests/test_texels.py \
-		-q -rs -p no:cacheprovider $(PYTEST_ARGS)
+	DETP_BAKE_NEEDS_BLENDER=$(CURDIR)/$(NEEDS_BLENDER) NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-core-$(CORE_HASH) \
+		$(VENVCORE)/bin/python -m pytest tests -q -p no:cacheprovider $(PYTEST_ARGS)
 
 env: $(VENV45)/.installed
 
@@ -59,6 +54,11 @@ demo: $(VENV45)/.installed
 
 test-4.5: $(VENV45)/.installed
 	NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-4.5-$(CORE_HASH) $(VENV45)/bin/python -m pytest tests $(PYTEST_ARGS)
+
+# The 4.5 line in `make test`: exactly the tests test-core skipped for want of bpy.
+test-4.5-blender: test-core $(VENV45)/.installed
+	@test -s $(NEEDS_BLENDER) || { echo "error: test-core named no Blender test ($(NEEDS_BLENDER))"; exit 1; }
+	NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-4.5-$(CORE_HASH) $(VENV45)/bin/python -m pytest @$(NEEDS_BLENDER) $(PYTEST_ARGS)
 
 test-5.2:
 	@if [ -z "$(PY313)" ]; then \
@@ -71,11 +71,13 @@ test-5.2:
 		NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-5.2-$(CORE_HASH) $(VENV52)/bin/python -m pytest tests $(PYTEST_ARGS); \
 	fi
 
-# The two lines run at once, each line's output kept together: the suite is mostly one thread
-# (numba's cold compiles, Blender's file loads), so on 2 cores both lines take about the time of one.
+# Every test runs once on the 4.5 pins: the whole suite without bpy (test-core: the core must work
+# without Blender, and a test that needs it unmarked fails there), then with bpy the tests it skipped;
+# the 5.2 line runs the whole suite beside them. The suite is mostly one thread (numba's cold
+# compiles, Blender's file loads), so on 2 cores the two lines take about the time of one.
 OUTPUT_SYNC := $(if $(filter output-sync,$(.FEATURES)),--output-sync=target,)
-test: test-core-smoke
-	$(MAKE) --no-print-directory -j2 $(OUTPUT_SYNC) test-4.5 test-5.2
+test:
+	$(MAKE) --no-print-directory -j2 $(OUTPUT_SYNC) test-4.5-blender test-5.2
 
 # Extension zips, one per platform of blender_manifest.toml, each with the wheels of both Blender
 # lines (cp311 for 4.5, cp313 for 5.2; numpy is Blender's own): dist/detp_bake-<version>-<platform>.zip.

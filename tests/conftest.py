@@ -3,7 +3,11 @@ bpy wheel writes nothing to the user's home.
 
 Without the bpy wheel (`make test-core`) the core tests run and every test that needs Blender is
 skipped for one reason, NO_BPY: a module that imports bpy (directly or through detp_bake.blender)
-is skipped as a whole, a test that asks for the `bpy` fixture is skipped alone."""
+is skipped as a whole, a test that asks for the `bpy` fixture is skipped alone.
+
+With DETP_BAKE_NEEDS_BLENDER=FILE such a run writes what it skipped for that reason to FILE, one
+test or module a line, as pytest arguments (`make test` then runs exactly those with bpy: every
+test runs once, with Blender or without, and none can be missed)."""
 import importlib.util
 import os
 import sys
@@ -44,6 +48,29 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.get_closest_marker("blender"):
             item.add_marker(pytest.mark.skip(reason=NO_BPY))
+
+
+_SKIPPED = []
+
+
+def _note(report) -> None:
+    if report.skipped and NO_BPY in str(report.longrepr):
+        _SKIPPED.append(f"tests/{report.nodeid}")
+
+
+def pytest_collectreport(report):
+    _note(report)
+
+
+def pytest_runtest_logreport(report):
+    _note(report)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    path = os.environ.get("DETP_BAKE_NEEDS_BLENDER")
+    if path and not HAVE_BPY:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text("".join(f"{n}\n" for n in dict.fromkeys(_SKIPPED)))
 
 
 def pytest_pycollect_makemodule(module_path, parent):
