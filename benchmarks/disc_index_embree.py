@@ -1,4 +1,4 @@
-"""Benchmark: our compiled BVH disc index against Embree, for DETP disc splatting (DESIGN.md §2, §5).
+"""Benchmark: our compiled BVH disc index against Embree, for DETP disc splatting (docs/design.md, Estimators and Measured library facts).
 
 The disc_index issue asks to decide by measurement whether our own numba BVH
 (detp_bake/estimators/disc_index.py) or Embree walks photon segments through the tangent discs

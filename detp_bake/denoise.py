@@ -20,7 +20,7 @@ of 3 seeds at 128², 1 seed at 512²): with white noise of 10 % / 20 %, RTLightm
 1.0 % / 2.3 %; plain RT without an albedo guide 2.4 % / 5.6 % at 128². Hence RTLightmap by
 default, and RT always with an albedo guide. Noise correlated over the estimators' 1.5-texel
 discs (a 3×3 box blur of white noise) passes through every variant almost untouched (10 % stays
-9.8–10.0 %): the network takes it for signal, as DESIGN.md §7 found on real bakes.
+9.8–10.0 %): the network takes it for signal, as on real bakes (docs/design.md, Denoising).
 
 A bake with the texel histogram (white noise) denoises its direct and indirect parts apart and adds
 them: alone, the smooth indirect part loses far more of its noise (tests/test_denoise.py; on the

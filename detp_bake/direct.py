@@ -1,5 +1,5 @@
 """Direct light at every texel by sampling the lights with shadow rays (the first pass of the
-classic two-pass split; DESIGN.md §7).
+classic two-pass split; docs/design.md, Denoising).
 
 Direct light holds the hard shadows and most of the energy, and a density estimate blurs it over its
 disc. Sampled here, it has no blur at all. Each ray starts at its own point of the texel's middle,

@@ -1,4 +1,4 @@
-"""Photon emission for every light type, in the units Cycles uses (DESIGN.md §3).
+"""Photon emission for every light type, in the units Cycles uses (docs/design.md, Units).
 
 Each light becomes an `Emitter` that knows its emitted flux (RGB watts) and can draw photons
 (origin, direction, flux). Photons are shared out between emitters in proportion to their flux,
@@ -384,7 +384,7 @@ def emissive_triangles(scene: Scene):
 
 
 def mesh_emitter(scene: Scene, offset: float) -> Emitter | None:
-    """Emissive triangles: Lambertian from BOTH faces, as Cycles emits (measured, DESIGN.md §3
+    """Emissive triangles: Lambertian from BOTH faces, as Cycles emits (measured, docs/design.md, Units
     calibration), so each triangle emits 2·π·L·A. Photons start `offset` off the surface so they
     do not hit their own triangle."""
     found = emissive_triangles(scene)

@@ -2,7 +2,7 @@
 
 The Blender adapter (the `blender` package) fills these dataclasses; tests build them by hand. All
 geometry is in world space, metres; colours are linear RGB; powers are watts as Cycles reads them
-(see DESIGN.md §3 and `lights.py` for the exact conventions).
+(docs/design.md, Units; `lights.py` holds the exact conventions).
 """
 from __future__ import annotations
 

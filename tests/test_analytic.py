@@ -1,4 +1,4 @@
-"""Irradiance against closed-form answers (DESIGN.md §4), for every estimator."""
+"""Irradiance against closed-form answers (docs/design.md, Ground truths), for every estimator."""
 import numpy as np
 import pytest
 

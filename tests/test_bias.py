@@ -1,4 +1,4 @@
-"""The two biases DETP was made to remove (DESIGN.md §2): darkened edges and light picked up from a
+"""The two biases DETP was made to remove (docs/design.md, Estimators): darkened edges and light picked up from a
 neighbouring surface. Both estimators see the same photons (same seed and count)."""
 import numpy as np
 

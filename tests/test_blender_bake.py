@@ -43,7 +43,7 @@ def test_energy_balance_on_the_cornell_box(cornell, bpy):
 @pytest.mark.parametrize("name, rtol", [("disc_index", 0.01), ("photon_map", 0.04)])
 def test_absorbed_flux_from_texels_matches_the_photons(cornell, bpy, name, rtol):
     """∫ E·(1 − ρ) dA over all lightmaps (texel coverage areas) = the flux the photons deposited:
-    DESIGN.md's energy balance, absorbed = emitted − escaped, read off the lightmaps."""
+    the energy balance of docs/design.md (Ground truths), absorbed = emitted − escaped, read off the lightmaps."""
     sc = export(bpy, resolution=48)
     r = compute(sc, BakeSettings(estimator=name, photons=1_000_000, bounces=1024,
                                  estimator_settings=EstimatorSettings(k=100, radius_texels=1.0)))
@@ -85,7 +85,7 @@ def test_cornell_box_matches_cycles(cornell_reference, cornell, bpy, record_prop
 
 @pytest.mark.parametrize("direct", ["photons", "sampled"])
 def test_emissive_mesh_and_world_match_cycles(empty_blend, bpy, direct):
-    """Calibration of the two emitters DESIGN.md says to check: a two-sided emissive plane and a
+    """Calibration of the two emitters docs/design.md (Units) says to check: a two-sided emissive plane and a
     constant world colour, against Cycles' direct-light bake of a receiver."""
     scene = empty_blend
     sky_world(bpy, scene, (0.1, 0.2, 0.3))

@@ -111,7 +111,7 @@ def test_oidn_itself_moves_the_mean_little_which_keep_energy_then_removes():
 
 
 def test_disc_correlated_noise_is_not_made_worse():
-    """OIDN reads noise shared over 1.5-texel discs as signal (DESIGN.md §7): it removes little
+    """OIDN reads noise shared over 1.5-texel discs as signal (docs/design.md, Denoising): it removes little
     of it, but it must not add error or move the energy."""
     truth, mask = _point_light(128), _charts(128)
     raw = _noisy(truth, mask, np.random.default_rng(3), disc=True)

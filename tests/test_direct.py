@@ -1,4 +1,4 @@
-"""Direct light by shadow rays (`--direct sampled`) against closed-form irradiance (DESIGN.md §4),
+"""Direct light by shadow rays (`--direct sampled`) against closed-form irradiance (docs/design.md, Ground truths),
 and against the photons' own estimate of the same light."""
 import numpy as np
 import pytest

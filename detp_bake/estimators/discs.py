@@ -4,7 +4,7 @@ Segment (o, w, L) crosses the disc of texel (x, n, r) when it arrives from the f
   (a) its plane hit t* = ((x − o)·n)/(w·n) lies in (0, L + ε] within r of x, or
   (b) it ends short of the plane but inside the slab 0 ≤ (e − x)·n ≤ δ above the disc, its end e
       within r of x laterally.
-(a) is DESIGN.md's rule; ε absorbs float error for segments ending on the disc's own plane. (b)
+(a) is the rule of docs/design.md (Estimators); ε absorbs float error for segments ending on the disc's own plane. (b)
 keeps concave surfaces honest: on a surface of radius R, a photon landing ρ from x ends ρ²/(2R)
 before the tangent plane, so (b) with δ = r/4 counts every landing within the disc on any surface
 with R ≥ 2r. The bake narrows δ to what the texel's own surface needs (rise.py: its greatest height

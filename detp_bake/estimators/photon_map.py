@@ -62,7 +62,7 @@ class PhotonMap(Estimator):
 
     @classmethod
     def fixed_noise(cls, settings):
-        """About 1/√(k − 1) whatever the photon count (DESIGN.md §2)."""
+        """About 1/√(k − 1) whatever the photon count (docs/design.md, Estimators)."""
         return 1.0 / float(np.sqrt(settings.k - 1))
 
     def __init__(self, texels, settings, progress=None, context=None):

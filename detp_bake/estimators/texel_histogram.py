@@ -8,7 +8,7 @@ points over the texel), so there is no blur beyond the texel and no darkening in
 It costs one lookup per landing and nothing per texel, where a DETP disc of r texels is crossed by
 some πr² times as many segments and each must be found in an index. Its noise is the price: about
 1/√(photons landing on the texel), and independent from texel to texel. That white noise is what
-OIDN is trained to remove (DESIGN.md §7: noise correlated over a disc passes through it), so this
+OIDN is trained to remove (docs/design.md, Denoising: noise correlated over a disc passes through it), so this
 estimator is meant to be denoised: it is the indirect part of a bake whose direct light comes from
 shadow rays, and the bake denoises the two parts apart (bake._finish), since OIDN smooths white
 noise over a smooth field far better than next to the sharp edges of direct light (L-shaped room,
