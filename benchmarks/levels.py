@@ -170,14 +170,17 @@ def _error(images, ref, masks) -> float:
     return float(np.sqrt(np.mean(d ** 2)) / np.mean(b))
 
 
-def time_ratio(row, cycles) -> tuple[float, bool]:
+def time_ratio(row, cycles) -> tuple[float, str]:
     """This row's seconds over Cycles + OIDN's at the same error, read off Cycles' (log-log) error
-    curve; past its noisiest point, over that point's time (a lower bound: `beyond` True)."""
+    curve, and where it lies on it: "" within it; "beyond" past its noisiest point (over that
+    point's time: a lower bound); "below" under its least error (over the time of Cycles' most
+    samples: an upper bound, Cycles would need longer)."""
     e = np.log([c["error"] for c in cycles])
     t = np.log([c["seconds"] for c in cycles])
     order = np.argsort(e)
-    beyond = row["error"] > max(c["error"] for c in cycles)
-    return row["seconds"] / float(np.exp(np.interp(np.log(row["error"]), e[order], t[order]))), bool(beyond)
+    side = "beyond" if row["error"] > max(c["error"] for c in cycles) else \
+        "below" if row["error"] < min(c["error"] for c in cycles) else ""
+    return row["seconds"] / float(np.exp(np.interp(np.log(row["error"]), e[order], t[order]))), side
 
 
 def race(bpy, size: int, spps, reference_spp: int, log) -> dict:
@@ -205,9 +208,9 @@ def race(bpy, size: int, spps, reference_spp: int, log) -> dict:
                      "error": _error(img, ref, masks)})
     cycles = [r for r in rows if r["method"].startswith("Cycles")]
     for row in rows:
-        row["ratio"], row["beyond"] = time_ratio(row, cycles)
+        row["ratio"], row["side"] = time_ratio(row, cycles)
         log(f"{row['method']}: {100 * row['error']:.2f} % in {row['seconds']:.1f} s "
-            f"({'over ' if row['beyond'] else ''}{row['ratio']:.2f} of Cycles + OIDN's time)")
+            f"({ {'beyond': 'over ', 'below': 'under '}.get(row['side'], '')}{row['ratio']:.2f} of Cycles + OIDN's time)")
     return {"size": size, "reference_spp": reference_spp, "rows": rows}
 
 
@@ -231,8 +234,9 @@ def markdown(data) -> str:
         out.append(f"\nRace at {rc['size']}² against Cycles at {rc['reference_spp']} spp:\n")
         out.append("| method | error | seconds | time / Cycles + OIDN's at that error |\n|---|---|---|---|")
         for r in rc["rows"]:
-            ratio = f"more than {r['ratio']:.2f} (noisier than Cycles' fewest samples)" if r.get("beyond") \
-                else f"{r['ratio']:.2f}"
+            ratio = {"beyond": f"more than {r['ratio']:.2f} (noisier than Cycles' fewest samples)",
+                     "below": f"less than {r['ratio']:.2f} (less error than Cycles' most samples)"}.get(
+                r.get("side"), f"{r['ratio']:.2f}")
             out.append(f"| {r['method']} | {100 * r['error']:.2f} % | {r['seconds']:.1f} | {ratio} |")
     return "\n".join(out) + "\n"
 
