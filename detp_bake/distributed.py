@@ -38,6 +38,7 @@ UNITS_PER_SLOT = 3  # units per worker thread: small enough to balance, large en
 MAX_UNIT_BATCHES = 16  # batches in a unit: a few seconds of one core
 EARLY_STOP_UNIT_BATCHES = 4  # for bakes that may stop early (noise target, time limit): little traced in vain
 AHEAD_PER_SLOT = 2  # units submitted ahead of the one the client adds next, per worker thread
+RESEND = 3  # times a unit the scheduler dropped (its worker died with the bake's only copy) is sent again
 MEMORY_SHARE = 0.6  # of a worker's memory limit a unit may plan to use
 CORE = "detp_bake"  # the core's package name on the workers
 _PREFIX = __name__.rpartition(".")[0]  # the core's package name here ("detp_bake" or bl_ext.….detp_bake)
@@ -144,14 +145,17 @@ class Cluster:
         for address, w in info.items():
             host = _host(address)
             slots[host] = slots.get(host, 0) + w.get("nthreads", 1)
-        [payload] = client.scatter([_dumps(job)], broadcast=True, hash=False)
+        data = _dumps(job)
+        payloads = client.scatter([data], broadcast=True, hash=False)
         run = _by_name(run_unit)
         ahead = AHEAD_PER_SLOT * sum(slots.values())  # units out at once: an early stop wastes little
         news = threading.Event()
+        again = {}  # unit -> times it was sent again after the scheduler dropped it
 
         def submit(i):
-            f = client.submit(run, f"job-{token}", payload, [(b[0], b[-1] + 1) for b in units[i]], slots,
-                              job.settings.threads, key=f"detp_bake-unit-{token}-{i}", pure=False, retries=0)
+            f = client.submit(run, f"job-{token}", payloads[-1], [(b[0], b[-1] + 1) for b in units[i]], slots,
+                              job.settings.threads, key=f"detp_bake-unit-{token}-{i}-{again.get(i, 0)}",
+                              pure=False, retries=0)
             f.add_done_callback(lambda _: news.set())
             return f
         out, done, nxt, sent, photons, resubmitted = {}, {}, 0, 0, 0, 0
@@ -167,8 +171,16 @@ class Cluster:
                     news.wait(0.2)
                     news.clear()
                 finished = {i: f for i, f in out.items() if f.done()}
-                for i, f in finished.items():
-                    if f.status != "finished":
+                for i, f in list(finished.items()):
+                    if f.status == "cancelled" and again.get(i, 0) < RESEND:
+                        # The scheduler dropped it: a worker that died held the only copy of the
+                        # bake (broadcast reaches the workers there at the time). Send both again.
+                        again[i] = again.get(i, 0) + 1
+                        payloads.extend(client.scatter([data], broadcast=True, hash=False))
+                        out[i] = submit(i)
+                        resubmitted += 1
+                        del finished[i]
+                    elif f.status != "finished":
                         raise BakeError(_failure(f, units[i]))
                 if finished:
                     resubmitted += self._resubmitted([f.key for f in finished.values()])
@@ -185,7 +197,7 @@ class Cluster:
                          "resubmitted": resubmitted, "seconds": round(time.perf_counter() - t0, 3)}
         finally:
             client.cancel(list(out.values()), force=True)
-            client.cancel([payload])
+            client.cancel(payloads)
 
     def _units(self, blocks: list, worker_bytes: tuple[int, int], early_stop: bool = False) -> list[list]:
         """Runs of consecutive blocks: about UNITS_PER_SLOT per worker thread (MAX_UNIT_BATCHES at most), fewer

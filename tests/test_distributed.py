@@ -225,10 +225,13 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_a_scheduler_and_workers_of_their_own_survive_a_killed_worker(tmp_path, bpy):
+@pytest.mark.parametrize("second", ["before", "during"])
+def test_a_scheduler_and_workers_of_their_own_survive_a_killed_worker(tmp_path, bpy, second):
     """`dask scheduler` and two `dask worker` processes started apart, the bake through the CLI's
     --scheduler: one worker is killed (SIGKILL) while units run; the files are byte-identical to a
-    bake here, and report.json counts the units that ran again."""
+    bake here, and report.json counts the units that ran again. `during`: the second worker joins
+    only once tracing runs, so the killed one held the only copy of the bake, and the scheduler
+    drops the units that needed it (they are sent again, with the bake)."""
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
@@ -236,12 +239,16 @@ def test_a_scheduler_and_workers_of_their_own_survive_a_killed_worker(tmp_path, 
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
                                "--port", str(port), "--no-dashboard"], **quiet)]
     try:
-        for k in range(2):
+        def worker(k):
             procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
                                            "--nthreads", "1", "--no-nanny", "--no-dashboard", "--name", f"w{k}"],
                                           **quiet))
+        worker(0)
+        if second == "before":
+            worker(1)
         args = [sys.executable, "-m", "detp_bake", "bake", str(CORNELL), "--objects", "Floor", "TallBox",
-                "--photons", "2000000", "--resolution", "16", "--no-denoise", "--connect-timeout", "60"]
+                "--photons", "2000000" if second == "before" else "8000000", "--resolution", "16", "--no-denoise",
+                "--connect-timeout", "60"]
         here = subprocess.run(args + ["--out", str(tmp_path / "here")], env=env, capture_output=True, text=True)
         assert here.returncode == 0, here.stderr
         far = subprocess.Popen(args + ["--out", str(tmp_path / "far"), "--scheduler", address], env=env,
@@ -250,7 +257,13 @@ def test_a_scheduler_and_workers_of_their_own_survive_a_killed_worker(tmp_path, 
         for line in far.stderr:  # the first traced units are in: the others are running
             err.append(line)
             if "Tracing" in line:
+                if second == "during":
+                    worker(1)
+                    from distributed import Client
+                    with Client(address) as watcher:  # the second has joined before the first goes
+                        watcher.wait_for_workers(2)
                 procs[1].send_signal(signal.SIGKILL)
+                assert far.poll() is None  # units were still out when it died
                 break
         rest, more = far.communicate(timeout=300)
         assert far.returncode == 0, "".join(err) + more
