@@ -296,221 +296,282 @@ def disc_reach(scene: Scene, settings: BakeSettings, names) -> float:
 
 def _compute_many(scene, settings, names, progress, cancel, cluster=None, frame_state=None, stop=None,
                   preview=None, reach_of=None) -> dict:
-    names = list(dict.fromkeys(names))
-    settings = _wide(settings)
-    for name in names:
-        replace(settings, estimator=name).validate()
-    scene.check()
-    automatic = not settings.photons
-    settings = replace(settings, photons=auto_photons(scene, settings))
-    scene, offset = scene.recentred()  # float32 rays and discs work near the origin (scene.py)
-    report = progress or (lambda p: None)
-    cancelled = _cancel_fn(cancel)
-    t_start = time.perf_counter()  # the time limit counts the whole bake
-    bounces = scene.default_bounces if settings.bounces is None else int(settings.bounces)
-    for obj in scene.objects:
-        if obj.bake and obj.resolution <= 0:
-            obj.resolution = settings.resolution
-    sampled = settings.direct == "sampled"
-    first = 1 if sampled else 0  # the first flight is direct light, left out when sampled
-    survival = float(np.mean(np.clip(scene.albedo, 0.0, 1.0).max(axis=1))) if scene.triangle_count else 0.0
-    per_photon = memory.segments_per_photon(survival, bounces)
-    per_photon_kept = memory.segments_per_photon(survival, bounces, first)
-    batch_size = memory.batch_photons(settings.batch_size, per_photon)
-    if automatic:
-        threads = settings.threads or os.cpu_count() or 1
-        expect = settings.photons * per_photon / (RAYS_PER_SECOND * threads)
-        report(Progress("prepare", 0.0, f"Photons: {_si(settings.photons)}, chosen for the lightmaps' texels "
-                                        f"({PHOTONS_PER_TEXEL} a texel; set them with --photons); tracing them should "
-                                        f"take about {expect:.2g} s on {threads} threads"))
-    need = _check_memory(scene, settings, names, batch_size, per_photon, per_photon_kept)
-    t0 = time.perf_counter()
-    texels = texels_mod.rasterise(scene)
-    caster = RayCaster(scene.positions)
-    t1 = time.perf_counter()
-    # Walls and props standing on a texel's square: its sample point and the part that counts (validity.py).
-    texels.cuts = validity.find_cuts(texels, scene, caster, settings.threads or os.cpu_count() or 1)
-    validity_seconds = time.perf_counter() - t1
-    every = any(estimators.get(name).every_texel for name in names)
-    sites = sites_mod.choose(texels, 1 if every else indirect_spacing(settings, frame_state))
-    at = sites.texels  # where the estimators run
-    rasterise_seconds = time.perf_counter() - t0 - validity_seconds
-    # DETP discs reach past a surface's edge by their radius and count what passes there: sun
-    # photons must start that far beyond the footprint of the geometry too.
-    discs = any(estimators.get(name).discs for name in names)
-    radius = disc_radius(at, settings.estimator_settings) if discs else None
-    reach = float(np.max(radius)) if discs and len(texels) else 0.0
-    if discs and reach_of:
-        reach = max(reach, _reach(scene, settings.estimator_settings, reach_of, settings.resolution))
-    tracer = PhotonTracer(scene, settings.photons, bounces, settings.seed, batch_size, settings.threads,
-                          indirect_only=sampled, caster=caster, margin=reach)
-    direct_e, sharp_e, direct_info = None, None, {"mode": settings.direct}
-    if sampled:
-        def direct_progress(fraction):
-            if cancelled():
-                raise BakeCancelled()
-            report(Progress("direct", fraction, f"Direct light {100 * fraction:.0f} %"))
-        if frame_state is not None:  # a frame of a range: re-sampled only where it can change
-            from . import frame_direct
-            direct_e, info = frame_direct.direct_irradiance(frame_state, scene, texels, caster, settings.direct_samples,
-                                                            settings.seed, tracer.threads, direct_progress, cancelled)
-        else:
-            # The sharp lights' part stays as the shadow rays give it when the lightmaps are denoised.
-            sharp_e = np.zeros((len(texels), 3), np.float32) if settings.denoise and denoise_mod.available() else None
-            direct_e, info = direct_mod.direct_irradiance(scene, texels, caster, settings.direct_samples,
-                                                          settings.seed, tracer.threads, direct_progress, cancelled,
-                                                          sharp=sharp_e)
-        direct_info.update(info)
+    run = _Pipeline(scene, settings, names, progress, cancel, cluster, frame_state, stop, preview)
+    run.texels_and_tracer(reach_of)
+    run.direct_light()
+    run.estimators()
+    run.trace()
+    return run.results()
 
-    def estimate_progress(fraction):
-        if cancelled():
-            raise BakeCancelled()
-        report(Progress("estimate", fraction, f"Estimating {100 * fraction:.0f} %"))
 
-    def preview_check(fraction):  # a slow preview's gather is a cancel point, not a phase
-        if cancelled():
+class _Pipeline:
+    """One bake, stage by stage (docs/architecture.md): the settings checked and the photons
+    chosen; the texels, their validity and the tracer; direct light by shadow rays; the estimators
+    and their discs; tracing, batch by batch, with noise, preview and the early stops; then each
+    estimator's lightmaps. Each stage leaves what the next needs on the object."""
+
+    def __init__(self, scene, settings, names, progress, cancel, cluster, frame_state, stop, preview):
+        self.names = list(dict.fromkeys(names))
+        settings = _wide(settings)
+        for name in self.names:
+            replace(settings, estimator=name).validate()
+        scene.check()
+        automatic = not settings.photons
+        self.settings = settings = replace(settings, photons=auto_photons(scene, settings))
+        self.scene, self.offset = scene.recentred()  # float32 rays and discs work near the origin (scene.py)
+        self.report = progress or (lambda p: None)
+        self.cancelled = _cancel_fn(cancel)
+        self.cluster, self.frame_state, self.stop, self.preview = cluster, frame_state, stop, preview
+        self.t_start = time.perf_counter()  # the time limit counts the whole bake
+        self.bounces = scene.default_bounces if settings.bounces is None else int(settings.bounces)
+        for obj in self.scene.objects:
+            if obj.bake and obj.resolution <= 0:
+                obj.resolution = settings.resolution
+        self.sampled = settings.direct == "sampled"
+        first = 1 if self.sampled else 0  # the first flight is direct light, left out when sampled
+        scene = self.scene
+        survival = float(np.mean(np.clip(scene.albedo, 0.0, 1.0).max(axis=1))) if scene.triangle_count else 0.0
+        per_photon = memory.segments_per_photon(survival, self.bounces)
+        self.per_photon_kept = memory.segments_per_photon(survival, self.bounces, first)
+        self.batch_size = memory.batch_photons(settings.batch_size, per_photon)
+        self.threads = settings.threads or os.cpu_count() or 1
+        if automatic:
+            expect = settings.photons * per_photon / (RAYS_PER_SECOND * self.threads)
+            self.report(Progress("prepare", 0.0, f"Photons: {_si(settings.photons)}, chosen for the lightmaps' "
+                                                 f"texels ({PHOTONS_PER_TEXEL} a texel; set them with --photons); "
+                                                 f"tracing them should take about {expect:.2g} s on {self.threads} "
+                                                 "threads"))
+        self.need = _check_memory(scene, settings, self.names, self.batch_size, per_photon, self.per_photon_kept)
+
+    def check_cancel(self, fraction=None) -> None:
+        if self.cancelled():
             raise BakeCancelled()
 
-    expected_segments = int(tracer.photons * per_photon_kept)
-    clearance = rise = extent = None
-    t0 = time.perf_counter()
-    if discs:
-        report(Progress("prepare", 0.0, "Measuring disc clearance"))
-        # A disc no wider than the piece of surface it lies on (a leaf card): rise.piece_extent.
-        welds = welded_pieces(at, scene)
-        extent = piece_extent(at, scene, welds)
-        radius = capped_radius(radius, extent)
-        clearance = texels_mod.tangent_clearance(at, scene.positions, radius, 0.5 * SLAB * radius)
-        rise = own_surface_rise(at, scene, radius, welds)
-    clearance_seconds = time.perf_counter() - t0
-    context = estimators.Context(scene_radius=tracer.escape_radius, expected_segments=expected_segments,
-                                 clearance=clearance, rise=rise, extent=extent, frames=frame_state, scene=scene)
-    runs, build = {}, {}
-    for name in names:
-        report(Progress("prepare", 0.5, f"Preparing {name}"))
+    def texels_and_tracer(self, reach_of) -> None:
+        """The texels, their validity (walls and props standing on a texel's square), the sites the
+        estimators run at, the widest disc, and the photon tracer."""
+        scene, settings = self.scene, self.settings
+        t0 = time.perf_counter()
+        self.texels = texels = texels_mod.rasterise(scene)
+        self.caster = RayCaster(scene.positions)
         t1 = time.perf_counter()
-        runs[name] = estimators.create(name, at, settings.estimator_settings, estimate_progress, context)
-        build[name] = time.perf_counter() - t1
-    spent = {name: 0.0 for name in names}
-    # Noise from the spread between blocks of batches, for the estimators that stream.
-    noise = {name: BatchNoise(len(at)) for name, est in runs.items() if est.streaming}
-    direct_at = None if direct_e is None else sites.of_sites(direct_e)
-    blocks = _blocks(tracer, runs, expected_segments)
-    primary = names[0]
-    total = tracer.photons
-    stopped_by = "photons"
-    current = {}
-    totals = Totals(names)
+        texels.cuts = validity.find_cuts(texels, scene, self.caster, self.threads)
+        self.validity_seconds = time.perf_counter() - t1
+        every = any(estimators.get(name).every_texel for name in self.names)
+        self.sites = sites_mod.choose(texels, 1 if every else indirect_spacing(settings, self.frame_state))
+        self.at = self.sites.texels  # where the estimators run
+        self.rasterise_seconds = time.perf_counter() - t0 - self.validity_seconds
+        # DETP discs reach past a surface's edge by their radius and count what passes there: sun
+        # photons must start that far beyond the footprint of the geometry too.
+        self.discs = any(estimators.get(name).discs for name in self.names)
+        self.radius = disc_radius(self.at, settings.estimator_settings) if self.discs else None
+        self.reach = float(np.max(self.radius)) if self.discs and len(texels) else 0.0
+        if self.discs and reach_of:
+            self.reach = max(self.reach, _reach(scene, settings.estimator_settings, reach_of, settings.resolution))
+        self.tracer = PhotonTracer(scene, settings.photons, self.bounces, settings.seed, self.batch_size,
+                                   settings.threads, indirect_only=self.sampled, caster=self.caster, margin=self.reach)
 
-    shown = [0]
+    def direct_light(self) -> None:
+        """Direct light by shadow rays (with direct='sampled'); the sharp lights' part apart when the
+        lightmaps are denoised, as it stays as the shadow rays give it."""
+        self.direct_e, self.sharp_e, self.direct_info = None, None, {"mode": self.settings.direct}
+        if not self.sampled:
+            return
+        settings, tracer = self.settings, self.tracer
 
-    def trace_progress(photons):
-        photons = shown[0] = max(shown[0], photons)  # units may finish out of order
-        message = f"Tracing {_si(photons)}/{_si(total)} photons"
-        if current:
-            message += f" · noise {100 * max(current.values(), default=0.0):.2g} %"
-        report(Progress("trace", photons / total, message))
+        def direct_progress(fraction):
+            self.check_cancel()
+            self.report(Progress("direct", fraction, f"Direct light {100 * fraction:.0f} %"))
+        if self.frame_state is not None:  # a frame of a range: re-sampled only where it can change
+            from . import frame_direct
+            self.direct_e, info = frame_direct.direct_irradiance(
+                self.frame_state, self.scene, self.texels, self.caster, settings.direct_samples, settings.seed,
+                tracer.threads, direct_progress, self.cancelled)
+        else:
+            self.sharp_e = np.zeros((len(self.texels), 3), np.float32) \
+                if settings.denoise and denoise_mod.available() else None
+            self.direct_e, info = direct_mod.direct_irradiance(
+                self.scene, self.texels, self.caster, settings.direct_samples, settings.seed, tracer.threads,
+                direct_progress, self.cancelled, sharp=self.sharp_e)
+        self.direct_info.update(info)
 
-    if cluster is None:
-        def over_time(batch_seconds):  # the next batch would take about as long as the last
-            return bool(settings.time_limit) and time.perf_counter() - t_start + batch_seconds > settings.time_limit
-        partials = (trace_batches(tracer, runs, block, cancelled, over_time) for block in blocks)
-    else:  # the same runs of batches on a cluster's workers (distributed.py), in batch order
-        job = TraceJob(scene, at, settings, names, bounces, batch_size, reach, context)
-        partials = cluster.partials(job, blocks, cancelled, trace_progress, _worker_bytes(need, at, runs, blocks))
-    with contextlib.closing(iter(partials)) as partials:
-        for part in partials:
-            totals.add(part)
-            share = tracer.schedule.share(totals.batches)
-            for name in noise:
-                noise[name].update(totals.sums[name]["irradiance"], share)
-            if primary in noise and noise[primary].groups >= 2:
-                direct_now = 0.0 if direct_at is None else direct_at
-                current = noise[primary].relative(at.lightmaps, direct_now + noise[primary].previous[:, None] /
-                                                  max(share, 1e-300))
-            trace_progress(totals.stats.photons)
-            if cancelled():
-                raise BakeCancelled()
-            if preview is not None:
-                so_far = partial(runs[primary].current, totals.sums[primary], preview_check)
-                preview(Snapshot(primary, totals.stats.photons, share, max(current.values(), default=None), texels,
-                                 partial(_snapshot_value, sites, so_far, direct_e, share), runs[primary].slow_preview))
-            if stop is not None and totals.batches < tracer.batch_count and stop():
-                stopped_by = "user"
-                break
-            over = part.stopped or (settings.time_limit and time.perf_counter() - t_start > settings.time_limit)
-            if over and totals.batches < tracer.batch_count:
-                stopped_by = "time_limit"
-                break
-            if settings.target_noise and noise.get(primary) is not None and noise[primary].groups >= MIN_GROUPS \
-                    and max(current.values(), default=0.0) * 100 <= settings.target_noise:
-                stopped_by = "target_noise"
-                break
-    tracer.stats, tracer.batches_done = totals.stats, totals.batches
-    part = None
-    for name, est in runs.items():
-        est.absorb(totals.sums.pop(name))  # the sums are the estimator's now: one copy, not two
-        spent[name] += totals.seconds[name]
-    share = tracer.share
-    estimate_progress(0.0)
-    # Texels a wall separates are denoised apart (validity.regions), in lightmaps that have cuts.
-    t1 = time.perf_counter()
-    regions = {lm.name: validity.regions(texels, lm, texels.cuts, caster, scene) for lm in texels.lightmaps
-               if settings.denoise and (texels.cuts.of[lm.texels] >= 0).any()}
-    validity_seconds += time.perf_counter() - t1
-    # Texels of charts too narrow for OIDN take their neighbours' mean on the surface (fragments.py),
-    # found lightmap by lightmap as each is denoised.
-    fragments_of = partial(fragments_mod.find, texels, scene=scene, caster=caster,
-                           threads=settings.threads or os.cpu_count() or 1) if settings.denoise else None
-    results = {}
-    for name in names:
-        est = runs[name]
+    def estimate_progress(self, fraction) -> None:
+        self.check_cancel()
+        self.report(Progress("estimate", fraction, f"Estimating {100 * fraction:.0f} %"))
+
+    def estimators(self) -> None:
+        """The discs' clearance, rise and extent (for the DETP family) and each estimator, built."""
+        at, settings = self.at, self.settings
+        self.expected_segments = int(self.tracer.photons * self.per_photon_kept)
+        clearance = rise = extent = None
+        t0 = time.perf_counter()
+        if self.discs:
+            self.report(Progress("prepare", 0.0, "Measuring disc clearance"))
+            # A disc no wider than the piece of surface it lies on (a leaf card): rise.piece_extent.
+            welds = welded_pieces(at, self.scene)
+            extent = piece_extent(at, self.scene, welds)
+            self.radius = radius = capped_radius(self.radius, extent)
+            clearance = texels_mod.tangent_clearance(at, self.scene.positions, radius, 0.5 * SLAB * radius)
+            rise = own_surface_rise(at, self.scene, radius, welds)
+        self.clearance_seconds = time.perf_counter() - t0
+        self.context = estimators.Context(scene_radius=self.tracer.escape_radius,
+                                          expected_segments=self.expected_segments, clearance=clearance, rise=rise,
+                                          extent=extent, frames=self.frame_state, scene=self.scene)
+        self.runs, self.build = {}, {}
+        for name in self.names:
+            self.report(Progress("prepare", 0.5, f"Preparing {name}"))
+            t1 = time.perf_counter()
+            self.runs[name] = estimators.create(name, at, settings.estimator_settings, self.estimate_progress,
+                                                self.context)
+            self.build[name] = time.perf_counter() - t1
+        self.spent = {name: 0.0 for name in self.names}
+        # Noise from the spread between blocks of batches, for the estimators that stream.
+        self.noise = {name: BatchNoise(len(at)) for name, est in self.runs.items() if est.streaming}
+
+    def _partials(self, trace_progress):
+        """The runs of batches traced here, or on a cluster's workers (distributed.py), in batch order."""
+        blocks = _blocks(self.tracer, self.runs, self.expected_segments)
+        if self.cluster is None:
+            settings = self.settings
+
+            def over_time(batch_seconds):  # the next batch would take about as long as the last
+                return bool(settings.time_limit) and \
+                    time.perf_counter() - self.t_start + batch_seconds > settings.time_limit
+            return (trace_batches(self.tracer, self.runs, block, self.cancelled, over_time) for block in blocks)
+        job = TraceJob(self.scene, self.at, self.settings, self.names, self.bounces, self.batch_size, self.reach,
+                       self.context)
+        return self.cluster.partials(job, blocks, self.cancelled, trace_progress,
+                                     _worker_bytes(self.need, self.at, self.runs, blocks))
+
+    def trace(self) -> None:
+        """Trace batch by batch until the photons are spent or a stop (the user's, the time limit,
+        the noise target) says enough; then the sums are the estimators'."""
+        settings, tracer, noise = self.settings, self.tracer, self.noise
+        primary, total = self.names[0], tracer.photons
+        direct_at = None if self.direct_e is None else self.sites.of_sites(self.direct_e)
+        self.stopped_by, self.current = "photons", {}
+        totals = Totals(self.names)
+        shown = [0]
+
+        def trace_progress(photons):
+            photons = shown[0] = max(shown[0], photons)  # units may finish out of order
+            message = f"Tracing {_si(photons)}/{_si(total)} photons"
+            if self.current:
+                message += f" · noise {100 * max(self.current.values(), default=0.0):.2g} %"
+            self.report(Progress("trace", photons / total, message))
+
+        with contextlib.closing(iter(self._partials(trace_progress))) as partials:
+            for part in partials:
+                totals.add(part)
+                share = tracer.schedule.share(totals.batches)
+                for name in noise:
+                    noise[name].update(totals.sums[name]["irradiance"], share)
+                if primary in noise and noise[primary].groups >= 2:
+                    direct_now = 0.0 if direct_at is None else direct_at
+                    self.current = noise[primary].relative(self.at.lightmaps, direct_now + noise[primary].previous[
+                        :, None] / max(share, 1e-300))
+                trace_progress(totals.stats.photons)
+                self.check_cancel()
+                self._show(totals, share)
+                self.stopped_by = self._stop(part, totals)
+                if self.stopped_by != "photons":
+                    break
+        tracer.stats, tracer.batches_done = totals.stats, totals.batches
+        for name, est in self.runs.items():
+            est.absorb(totals.sums.pop(name))  # the sums are the estimator's now: one copy, not two
+            self.spent[name] += totals.seconds[name]
+
+    def _show(self, totals, share) -> None:
+        """The live preview of the primary estimator's lightmaps so far, when one is asked."""
+        if self.preview is None:
+            return
+        primary = self.names[0]
+        so_far = partial(self.runs[primary].current, totals.sums[primary], self.check_cancel)
+        self.preview(Snapshot(primary, totals.stats.photons, share, max(self.current.values(), default=None),
+                              self.texels, partial(_snapshot_value, self.sites, so_far, self.direct_e, share),
+                              self.runs[primary].slow_preview))
+
+    def _stop(self, part, totals) -> str:
+        """What stops the bake after this run of batches: "photons" (nothing yet), "user", the time
+        limit or the noise target."""
+        settings, noise, primary = self.settings, self.noise, self.names[0]
+        more = totals.batches < self.tracer.batch_count
+        if self.stop is not None and more and self.stop():
+            return "user"
+        if more and (part.stopped or (settings.time_limit and time.perf_counter() - self.t_start > settings.time_limit)):
+            return "time_limit"
+        if settings.target_noise and noise.get(primary) is not None and noise[primary].groups >= MIN_GROUPS \
+                and max(self.current.values(), default=0.0) * 100 <= settings.target_noise:
+            return "target_noise"
+        return "photons"
+
+    def results(self) -> dict:
+        """Each estimator's lightmaps, denoised by region and with the fragments smoothed."""
+        settings, texels, scene = self.settings, self.texels, self.scene
+        self.estimate_progress(0.0)
+        # Texels a wall separates are denoised apart (validity.regions), in lightmaps that have cuts.
+        t1 = time.perf_counter()
+        self.regions = {lm.name: validity.regions(texels, lm, texels.cuts, self.caster, scene)
+                        for lm in texels.lightmaps if settings.denoise and (texels.cuts.of[lm.texels] >= 0).any()}
+        self.validity_seconds += time.perf_counter() - t1
+        # Texels of charts too narrow for OIDN take their neighbours' mean on the surface (fragments.py),
+        # found lightmap by lightmap as each is denoised.
+        self.fragments_of = partial(fragments_mod.find, texels, scene=scene, caster=self.caster,
+                                    threads=self.threads) if settings.denoise else None
+        results = {name: self._result(name) for name in self.names}
+        if self.offset.any():
+            texels.position += self.offset  # back where the texels are, in world space
+        return results
+
+    def _result(self, name) -> BakeResult:
+        settings, share = self.settings, self.tracer.share
+        est = self.runs[name]
         t1 = time.perf_counter()
         out = est.finish()
         # The estimator's per-texel state goes before the images are made: the class still
         # answers what the rest of the loop asks (streaming, discs, stores_hits, fixed_noise).
-        runs[name] = type(est)
+        self.runs[name] = kind = type(est)
         est = None
-        out.irradiance = sites.expand(out.irradiance)
-        value = _value(out, direct_e, share)
-        spent[name] += time.perf_counter() - t1
-        seconds = {"rasterise": rasterise_seconds, "validity": validity_seconds,
-                   "direct": direct_info.get("seconds", 0.0), "clearance": clearance_seconds, "build": build[name], "trace": tracer.stats.seconds,
-                   "estimate": spent[name]}
+        out.irradiance = self.sites.expand(out.irradiance)
+        value = _value(out, self.direct_e, share)
+        self.spent[name] += time.perf_counter() - t1
+        seconds = {"rasterise": self.rasterise_seconds, "validity": self.validity_seconds,
+                   "direct": self.direct_info.get("seconds", 0.0), "clearance": self.clearance_seconds,
+                   "build": self.build[name], "trace": self.tracer.stats.seconds, "estimate": self.spent[name]}
         # An estimate with white noise is denoised apart from the direct light (denoise.py).
-        apart = None if direct_e is None or not runs[name].for_denoiser else direct_e
-        sharp = None if apart is None else sharp_e
-        result = _finish(replace(settings, estimator=name), bounces, texels, value, out.counters, tracer, seconds,
-                         direct_info, apart, regions, sharp, fragments_of)
+        apart = None if self.direct_e is None or not kind.for_denoiser else self.direct_e
+        sharp = None if apart is None else self.sharp_e
+        result = _finish(replace(settings, estimator=name), self.bounces, self.texels, value, out.counters,
+                         self.tracer, seconds, self.direct_info, apart, self.regions, sharp, self.fragments_of)
         result.direct["denoised_apart"] = apart is not None and bool(result.raw_images)
         result.direct["sharp_kept"] = sharp is not None and bool(result.raw_images)
-        apart = sharp = None
-        out = value = None
-        result.stopped_by = stopped_by
-        result.share = share
-        result.export = dict(getattr(scene, "export_stats", None) or {})
-        result.cluster = dict(cluster.last) if cluster is not None else {}
-        if name in noise:
-            result.noise = noise[name].relative(at.lightmaps, sites.of_sites(result.value), scale=np.pi)
-        elif runs[name].fixed_noise(settings.estimator_settings) is not None:
-            fixed = runs[name].fixed_noise(settings.estimator_settings)
-            result.noise = {lm.name: fixed for lm in texels.lightmaps}
-        result.warnings.extend(layout_warnings(at, settings.estimator_settings,
-                                               radius if runs[name].discs else None))
-        result.direct["indirect_spacing"] = sites.spacing
+        apart = sharp = out = value = None
+        result.stopped_by, result.share = self.stopped_by, share
+        result.export = dict(getattr(self.scene, "export_stats", None) or {})
+        result.cluster = dict(self.cluster.last) if self.cluster is not None else {}
+        self._report_noise(name, kind, result)
+        return result
+
+    def _report_noise(self, name, kind, result) -> None:
+        """The result's noise, warnings and memory figures."""
+        settings, at = self.settings, self.at
+        if name in self.noise:
+            result.noise = self.noise[name].relative(at.lightmaps, self.sites.of_sites(result.value), scale=np.pi)
+        elif kind.fixed_noise(settings.estimator_settings) is not None:
+            fixed = kind.fixed_noise(settings.estimator_settings)
+            result.noise = {lm.name: fixed for lm in self.texels.lightmaps}
+        result.warnings.extend(layout_warnings(at, settings.estimator_settings, self.radius if kind.discs else None))
+        result.direct["indirect_spacing"] = self.sites.spacing
         result.direct["indirect_sites"] = len(at)
         k = settings.estimator_settings.k
-        if runs[name].stores_hits and result.counters.get("hits", k) < k:
+        if kind.stores_hits and result.counters.get("hits", k) < k:
             result.warnings.append(f"setting 'k' = {k} is more than the {result.counters['hits']:,} photons the "
                                    "photon map stored: every texel averaged all of them (a blur over the scene); "
                                    "trace more photons or lower k")
+        need = self.need
         result.memory = {"estimate_mb": round(need.total / 1e6, 1),
                          "parts_mb": {k: round(v / 1e6, 1) for k, v in need.parts.items()},
-                         "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": batch_size}
-        results[name] = result
-    if offset.any():
-        texels.position += offset  # back where the texels are, in world space
-    return results
+                         "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": self.batch_size}
 
 
 @dataclass
