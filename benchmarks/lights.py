@@ -27,7 +27,7 @@ import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 from detp_bake.direct import direct_irradiance  # noqa: E402
-from detp_bake.photons import RayCaster  # noqa: E402
+from detp_bake.rays import RayCaster  # noqa: E402
 from detp_bake.texels import rasterise  # noqa: E402
 
 

@@ -20,7 +20,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from . import __version__, charts as charts_mod, denoise as denoise_mod, direct as direct_mod, estimators, \
-    fragments as fragments_mod, images, interrupt, memory, options, sites as sites_mod, staging, texels as texels_mod, validity
+    fragments as fragments_mod, frame_direct, images, interrupt, memory, options, sites as sites_mod, staging, texels as texels_mod, validity
 from .errors import BakeCancelled, BakeError
 from .options import AUTO_PHOTONS, DIRECT_MODES, MAX_BOUNCES, MAX_DIRECT_SAMPLES, MAX_PHOTONS, MAX_RESOLUTION, \
     MAX_SPACING, PHOTONS_PER_TEXEL, default  # noqa: F401 (the front ends read the limits here too)
@@ -28,7 +28,8 @@ from .noise import MIN_GROUPS, BatchNoise
 from .estimators import EstimatorSettings
 from .estimators.discs import SLAB, capped_radius, disc_radius
 from .estimators.rise import own_surface_rise, piece_extent, welded_pieces
-from .photons import PhotonBatch, PhotonTracer, RayCaster, TraceStats
+from .photons import PhotonBatch, PhotonTracer, TraceStats
+from .rays import RayCaster
 from .scene import Scene
 
 # Ranges and defaults of the settings: options.py (re-exported here for the bake's own messages).
@@ -383,7 +384,6 @@ class _Pipeline:
             self.check_cancel()
             self.report(Progress("direct", fraction, f"Direct light {100 * fraction:.0f} %"))
         if self.frame_state is not None:  # a frame of a range: re-sampled only where it can change
-            from . import frame_direct
             self.direct_e, info = frame_direct.direct_irradiance(
                 self.frame_state, self.scene, self.texels, self.caster, settings.direct_samples, settings.seed,
                 tracer.threads, direct_progress, self.cancelled)
@@ -847,6 +847,19 @@ def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) ->
                         f"{' (the memory budget preference)' if settings.memory_budget_mb else ' (80 % of free memory)'}"
                         f": use {' or '.join(advice) or 'a smaller bake'}")
     return need
+
+
+def warn_stale(out_dir: Path, result, warn) -> None:
+    """One warning listing the lightmaps of the objects being baked, with this estimator, that an
+    earlier bake left in `out_dir` and this one will not replace (a PNG from an exr,png bake, a raw
+    EXR from a --keep-raw bake). They are left alone, as is every other file there."""
+    writing = {p.name for targets in output_paths(result, out_dir).values() for p in targets}
+    stale = sorted(name for stem in images.file_stems(result.images).values() for suffix in ("exr", "png", "raw.exr")
+                   for name in [f"{stem}.{result.settings.estimator}.{suffix}"]
+                   if name not in writing and (out_dir / name).is_file())
+    if stale:
+        warn(f"{len(stale)} lightmaps in {out_dir} from an older bake of the same objects are left as they "
+             f"were (not written this time): {', '.join(stale[:8])}{' …' if len(stale) > 8 else ''}")
 
 
 def output_paths(result: BakeResult, out_dir: Path, frame: Optional[int] = None) -> dict:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import images
+
 HEADER = 22  # pixels of label strip above each row
 
 
@@ -72,7 +74,6 @@ def report_files(results: dict, names: list) -> tuple[dict, dict]:
     Returns (the summary, {file name: write(path)})."""
     import json
 
-    from . import images
     first = results[names[0]]
     seconds = {n: results[n].seconds["estimate"] for n in names}
     picture, diffs = comparison_image({n: results[n].images for n in names}, first.masks, seconds)

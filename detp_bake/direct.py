@@ -43,7 +43,7 @@ import numba
 import numpy as np
 
 from .errors import BakeCancelled, BakeError
-from .lights import _spot_att, emissive_triangles
+from .lights import emissive_triangles, spot_factor
 from .sampling import (cone_lobe, cosine_hemisphere, in_frame, inline, jit, orthonormal_basis, photon_rng,
                        search_cdf, seed_key, uniform2, uniform_disc, uniform_triangle)
 from .environment import environment_rays
@@ -231,7 +231,7 @@ def _shadow_rays(kind, prm, j0, samples, stride, sel, counts, key, ids, a, b, po
                 ax, ay, az = cx / dist, cy / dist, cz / dist  # towards the light's centre
                 att = 1.0
                 if prm[12] > 0.0:  # spot: the angle between its axis and the way to the texel
-                    att = _spot_att(-(ax * prm[7] + ay * prm[8] + az * prm[9]), prm[10], prm[11])
+                    att = spot_factor(-(ax * prm[7] + ay * prm[8] + az * prm[9]), prm[10], prm[11])
                     if att <= 0.0:
                         continue
                 radius = prm[6]
@@ -357,7 +357,7 @@ def light_shares(kinds, params, samples, a, b, pos, nrm, out):
                 if kind == AREA:
                     c *= max(-(cx * prm[12] + cy * prm[13] + cz * prm[14]) / dist, 0.05)
                 if kind == POINT and prm[12] > 0.0:
-                    c *= max(_spot_att(-(cx * prm[7] + cy * prm[8] + cz * prm[9]) / dist, prm[10], prm[11]), 0.05)
+                    c *= max(spot_factor(-(cx * prm[7] + cy * prm[8] + cz * prm[9]) / dist, prm[10], prm[11]), 0.05)
                 wq = power * max(c, 0.05) / max(d2, size2)
             weight[q] = wq
             total += wq
@@ -451,7 +451,7 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     sums its texels' rays in float64 and stores them as float32: the value is only stored until
     the estimate is added to it, and float32 holds it to the precision of the lightmap images.
 
-    `caster` is the `photons.RayCaster` of the scene's triangles (shared with the photon tracer).
+    `caster` is the `rays.RayCaster` of the scene's triangles (shared with the photon tracer).
     Deterministic for a seed whatever the thread count: every texel's numbers come from its own
     stream, and each texel is summed by one chunk. `spread`: rays start all over the texel's square
     (texel_area.py, as Cycles bakes), or all at its position (its centre, for closed-form checks).

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .footprint import sky_areas, sky_start
-from .lights import Emitter
+from .emitter import Emitter
 from .sampling import inline, jit, photon_rng, search_cdf, uniform2
 from .texel_area import area_point
 

@@ -25,6 +25,7 @@ import numpy as np
 from . import direct as direct_mod
 from .scene import AreaLight, PointLight, SpotLight, SunLight
 from .texel_area import spread_reach
+from .texels import select
 
 
 @dataclass
@@ -118,7 +119,6 @@ def direct_irradiance(state, scene, texels, caster, samples, seed, threads, prog
     out = kept.value.copy()
     rows = np.flatnonzero(kept.near)
     if len(rows) < len(texels) or not first:
-        from .texels import select
         part, info_part = direct_mod.direct_irradiance(scene, select(texels, kept.near), caster, samples, seed,
                                                        threads, None if first else progress, cancel)
         out[rows] = part

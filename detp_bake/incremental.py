@@ -32,7 +32,8 @@ from typing import Iterable, Optional
 
 import numpy as np
 
-from . import __version__
+from . import __version__, denoise
+from .bake import disc_reach
 from .scene import Scene, SunLight
 
 # Estimators whose per-texel sums cannot depend on the other texels of the bake (a single-frame
@@ -103,7 +104,6 @@ def settings_key(settings) -> str:
     values = asdict(settings)
     for name in ("threads", "memory_budget_mb"):
         values.pop(name, None)
-    from . import denoise
     values["denoised"] = bool(settings.denoise and denoise.available())  # pyoidn may come or go
     return json.dumps(values, sort_keys=True, default=list)
 
@@ -169,7 +169,6 @@ def plan(scene: Scene, settings, out_dir, force: bool = False) -> Plan:
     """Which objects of `scene` (those with `bake` set) a bake into `out_dir` must estimate. An
     object is reused when the earlier report.json there holds its key and all its files exist;
     `force` reuses nothing."""
-    from .bake import disc_reach
     names = [o.name for o in scene.objects if o.bake]
     result = Plan(object_keys(scene, settings, names, disc_reach(scene, settings, names)), bake=list(names))
     if not reusable(settings):

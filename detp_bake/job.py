@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterator, Optional
 
-from . import bake as bake_mod, comparison, output
+from . import bake as bake_mod, comparison, frames, images, incremental, photons
 from .errors import BakeCancelled, BakeError
 
 # Share of the whole job each phase stands for (the progress bar and the ETA).
@@ -308,11 +308,9 @@ class Job:
         for name in self.names:
             replace(self.settings, estimator=name).validate()
         if self.out_dir is not None:
-            from . import images
             images.check_writable_dir(self.out_dir)
         scene, plan = self.scene, None
         if self.reuse and self.kind == "bake" and self.out_dir is not None:
-            from . import incremental
             plan = incremental.plan(scene, self.settings, self.out_dir, self.force)
             if not plan.bake:  # every lightmap is there and cannot have changed
                 report = incremental.write_all_reused(plan, self.out_dir)
@@ -330,7 +328,7 @@ class Job:
             result.seconds["export"] = self.export_seconds
             found = []
             if self.out_dir is not None:  # older files of these lightmaps that this bake leaves
-                output.warn_stale(self.out_dir, result, found.append)
+                bake_mod.warn_stale(self.out_dir, result, found.append)
             for message in dict.fromkeys(found + result.warnings):
                 self._send(Warning(message))
             result.warnings = list(dict.fromkeys(self._warnings + found + result.warnings))  # for report.json
@@ -366,7 +364,6 @@ class FramesJob(Job):
         self.notes: list = []
 
     def _compute(self) -> Result:
-        from . import frames
         done = frames.bake_frames(self.scene_at, self.frame_range, self.settings, self.out_dir, self._progress,
                                   self._cancel, self.moving, self.static, self.notes.append, self.force)
         if not done.frames:
@@ -377,5 +374,4 @@ class FramesJob(Job):
 def release_memory() -> None:
     """Let go of what the core keeps between jobs (the tracer's buffer pools). Embree's scene goes
     with the job's last reference to it; embreex has no call of its own for that."""
-    from . import photons
     photons.release_memory()

@@ -18,36 +18,16 @@ import numpy as np
 from .sampling import (cone_lobe, cosine_hemisphere, cosine_lobe, in_frame, inline, jit, orthonormal_basis,
                        search_cdf,
                        photon_rng, uniform2, uniform_disc, uniform_sphere, uniform_triangle)
+from .emitter import Emitter
+from .environment import environment_emitter
 from .errors import BakeError
+from .footprint import Footprint, emit_sky, emit_sun, mean_sky_area
 from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
 
-# emit(key, first_id, count, total_count, origins, directions, flux, rng): writes `count` photons,
-# ids first_id, first_id + 1, …, into rows 0 … count − 1 of the (N, 3) float32 or float64 arrays,
-# and each photon's random state after emission into `rng` (uint64; an empty array: not kept).
-# A photon carries 1/total_count of its emitter's flux.
-Emit = Callable[[np.uint64, int, int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
-
-
-@dataclass
-class Emitter:
-    name: str
-    flux: np.ndarray  # RGB watts actually emitted
-    emit: Emit
-
-    @property
-    def weight(self) -> float:
-        return float(np.mean(self.flux))
-
-    def sample(self, n: int, total: int, rng: np.random.Generator):
-        """n photons (float64 origins, directions, flux) keyed by a draw from `rng`."""
-        out = [np.empty((n, 3)) for _ in range(3)]
-        self.emit(np.uint64(rng.integers(2 ** 64, dtype=np.uint64)), 0, int(n), int(total), *out,
-                  np.empty(0, np.uint64))
-        return tuple(out)
-
-
 @inline
-def _spot_att(c, cos_half, smooth):
+def spot_factor(c, cos_half, smooth):
+    """A spot's factor at the cosine `c` to its axis: 0 outside the cone (cosine of its half angle
+    `cos_half`), 1 inside, a smoothstep over `smooth` of cosine between (Cycles' spot blend)."""
     if smooth <= 0.0:
         return 1.0 if c > cos_half else 0.0
     t = min(max((c - cos_half) / smooth, 0.0), 1.0)
@@ -58,7 +38,7 @@ def _spot_att(c, cos_half, smooth):
 def _spot_att_all(c, cos_half, smooth):
     out = np.empty_like(c)
     for i in range(c.shape[0]):
-        out[i] = _spot_att(c[i], cos_half, smooth)
+        out[i] = spot_factor(c[i], cos_half, smooth)
     return out
 
 
@@ -184,7 +164,7 @@ def _spot(key, photon_id, pos, t, s, axis, cos_half, smooth, scale):
     r, u0, u1, u2, u3 = _draw4(key, photon_id)
     lx, ly, lz = cone_lobe(cos_half, u0, u1)
     dx, dy, dz = in_frame(lx, ly, lz, t, s, axis)
-    att = _spot_att(lz, cos_half, smooth)
+    att = spot_factor(lz, cos_half, smooth)
     return r, pos[0], pos[1], pos[2], dx, dy, dz, scale[0] * att, scale[1] * att, scale[2] * att
 
 
@@ -329,7 +309,6 @@ def sun_emitter(light: SunLight, centre: np.ndarray, radius: float, positions: n
     centre = np.asarray(centre, np.float64)
     frame = _frame(axis)
     if positions is not None and len(positions):
-        from .footprint import Footprint, emit_sun
         fp = Footprint.build(positions, axis, frame, centre, radius, 0.5 * float(light.angle), margin)
         flux = e * fp.area
 
@@ -411,7 +390,6 @@ def world_emitter(radiance: np.ndarray, centre: np.ndarray, radius: float, lo=No
     """Uniform sky radiance L. Photons start on the geometry's box [lo, hi] seen along their
     direction (footprint.sky_start): the flux L·4π·⟨area⟩ crosses it, the sky's share that can
     reach the scene. Without a box, the bounding sphere's disc (L·πR²·4π)."""
-    from .footprint import emit_sky, mean_sky_area
 
     radiance = np.asarray(radiance, np.float64)
     centre = np.asarray(centre, np.float64)
@@ -450,7 +428,6 @@ def build_emitters(scene: Scene, margin: float = 0.0) -> list[Emitter]:
               scene.positions.reshape(-1, 3).max(axis=0).astype(np.float64) + margin) \
         if len(scene.positions) else (None, None)
     if scene.world_map is not None:
-        from .environment import environment_emitter
         out.append(environment_emitter(scene.world_map, centre, radius, lo, hi))
     elif np.mean(scene.world) > 0.0:
         out.append(world_emitter(scene.world, centre, radius, lo, hi))

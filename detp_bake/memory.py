@@ -19,6 +19,8 @@ except ImportError:  # Windows
     resource = None
 from dataclasses import dataclass
 
+from .photons import PhotonTracer
+
 SEGMENT_BYTES = 40  # origin, direction, length, flux (float32)
 HIT_BYTES = 52  # position, direction, flux, normal (float32), triangle
 STREAM_RAY_BYTES = 73  # a stream's log row: ray, flux, random state, Embree's answer, flags
@@ -81,7 +83,6 @@ def estimate(pixels: int, estimator_bytes: dict, batch: int, per_photon_all: flo
     bytes per texel}; batch: photons per batch; per_photon_all / per_photon_kept: segments a photon
     makes / hands to the estimator; stored_hits: hits the photon map keeps; denoised_pixels: the largest
     lightmap's pixels when lightmaps are denoised (one at a time), else 0."""
-    from .photons import PhotonTracer
     parts = {
         "texels": pixels * TEXEL_BYTES,
         "lightmap images": pixels * PIXEL_BYTES,

@@ -79,18 +79,3 @@ def _paths(files):
         else:
             yield from value
 
-
-def warn_stale(out_dir: Path, result, warn) -> None:
-    """One warning listing the lightmaps of the objects being baked, with this estimator, that an
-    earlier bake left in `out_dir` and this one will not replace (a PNG from an exr,png bake, a raw
-    EXR from a --keep-raw bake). They are left alone, as is every other file there."""
-    from .bake import output_paths
-    from .images import file_stems
-    writing = {p.name for targets in output_paths(result, out_dir).values() for p in targets}
-    stale = sorted(name for stem in file_stems(result.images).values() for suffix in ("exr", "png", "raw.exr")
-                   for name in [f"{stem}.{result.settings.estimator}.{suffix}"]
-                   if name not in writing and (out_dir / name).is_file())
-    if stale:
-        warn(f"{len(stale)} lightmaps in {out_dir} from an older bake of the same objects are left as they "
-             f"were (not written this time): {', '.join(stale[:8])}{' …' if len(stale) > 8 else ''}")
-

@@ -10,13 +10,16 @@ bottom row, as in Blender's `Image.pixels`. Files are written top row first (see
 """
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
 
 from . import charts as charts_mod
+from .bvh import discs_meet_triangles
 from .errors import BakeError
+from .rays import RayCaster
 from .scene import Scene
 
 HALF_DIAGONAL_SQ = 0.5  # (√2 / 2)², in texel units
@@ -441,13 +444,6 @@ def tangent_clearance(texels: TexelSet, positions: np.ndarray, reach: np.ndarray
     Most texels have nothing but their own surface within reach: a compiled, conservative test
     (does any triangle cross the lifted disc?) finds the others, and only they cast rays, spread
     over `threads` threads (0: numba's count). The result is the same as casting every ray."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    import numba
-
-    from .estimators.bvh import discs_meet_triangles
-    from .photons import RayCaster
-
     best = reach.astype(np.float64).copy()
     origin = texels.position + texels.normal * lift[:, None]
     todo = np.flatnonzero(discs_meet_triangles(positions, origin, texels.normal, reach))

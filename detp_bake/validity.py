@@ -40,7 +40,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .estimators.bvh import discs_meet_triangles, faces_against
+from .bvh import discs_meet_triangles, faces_against
 from .sampling import inline
 from .texels import TexelSet, geometric_normals, neighbour_pairs, pixel_steps
 

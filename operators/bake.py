@@ -1,42 +1,14 @@
 """`detp_bake.bake`: export on the main thread, the job (trace, estimate, write) on its worker,
 progress and the live preview in the viewport, Esc to cancel, Stop and Keep to end early with
 what there is, one undo step for the result. In background mode it runs at once."""
-import json
 
 import bpy
 
-from ..detp_bake import blender, job as job_mod
+from ..detp_bake import job as job_mod
 from ..detp_bake.errors import BakeError
 from . import common
-from .job import BlenderJob
-
-
-class BakeJob(BlenderJob):
-    """A bake: its finish applies the lightmaps and records the last bake's statistics."""
-
-    def finish(self, report) -> set:
-        """Apply the result (main thread) or undo the export's changes; returns operator status."""
-        if not self.succeeded(report):
-            return self.failed(report)
-        r = self.outcome.results[self.settings.estimator]
-        scene = self.bl_scene
-        s = scene.detp_bake
-        if s.apply_after_bake and "exr" in r.settings.formats:
-            uv = common.uv_layers([scene.objects[n] for n in self.objects if n in scene.objects])
-            blender.apply_all(scene, r.files, uv, r.settings.estimator)
-        summary = r.report()
-        s.last_report = json.dumps({"estimator": r.settings.estimator, "photons": summary["photons"],
-                                    "segments": summary["segments"], "objects": len(r.files),
-                                    "seconds": summary["seconds"], "files": r.files,
-                                    "noise": summary["noise"], "stopped_by": summary["stopped_by"],
-                                    "charts": {o["name"]: o["charts"] for o in summary["objects"] if "charts" in o},
-                                    "output_directory": self.out_dir})
-        total = sum(v for k, v in r.seconds.items() if k != "rasterise")
-        for warning in self.warnings:
-            report({"WARNING"}, warning)
-        report({"INFO"}, f"Baked {len(r.files)} lightmaps with {r.settings.estimator} in {total:.1f} s "
-                         f"({summary['photons']:,} photons) to {self.out_dir}")
-        return {"FINISHED"}
+from .bake_frames import FramesBlenderJob
+from .job import BakeJob
 
 
 class JobOperator:
@@ -137,7 +109,6 @@ class DETPBAKE_OT_bake(JobOperator, bpy.types.Operator):
 
     def make_job(self, context):
         if context.scene.detp_bake.use_frame_range:  # the panel's Frame Range
-            from .bake_frames import FramesBlenderJob
             return FramesBlenderJob(context)
         return BakeJob(context)
 

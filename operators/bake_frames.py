@@ -9,7 +9,7 @@ from dataclasses import replace
 from ..detp_bake import blender, frames, job as job_mod, memory
 from ..detp_bake.errors import BakeError
 from . import common
-from .bake import BakeJob
+from .job import BakeJob
 
 
 class FramesBlenderJob(BakeJob):

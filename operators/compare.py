@@ -7,8 +7,7 @@ import numpy as np
 from bpy.props import EnumProperty
 from mathutils import Matrix
 
-from ..detp_bake import blender, estimators
-from ..ui.properties import ESTIMATORS
+from ..detp_bake import blender, estimators, options
 from . import common
 from .bake import JobOperator
 from .job import BlenderJob
@@ -104,7 +103,7 @@ class DETPBAKE_OT_compare(JobOperator, bpy.types.Operator):
     bl_label = "Compare Estimators"
     bl_options = {"REGISTER", "UNDO"}
 
-    estimators: EnumProperty(name="Estimators", options={"ENUM_FLAG"}, items=ESTIMATORS,
+    estimators: EnumProperty(name="Estimators", options={"ENUM_FLAG"}, items=list(options.BY_NAME["estimator"].choice_list),
                              default=set(estimators.compare_defaults()))
 
     @classmethod

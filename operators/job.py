@@ -7,6 +7,7 @@ and applies the result, or removes the UV layers the export created. Both use th
 exported, whatever scene is current by then.
 """
 import contextlib
+import json
 import time
 from dataclasses import replace
 
@@ -137,3 +138,31 @@ class BlenderJob:
         else:
             report({"WARNING"}, f"{self.kind.capitalize()} cancelled: nothing was written or changed")
         return {"CANCELLED"}
+
+
+class BakeJob(BlenderJob):
+    """A bake: its finish applies the lightmaps and records the last bake's statistics."""
+
+    def finish(self, report) -> set:
+        """Apply the result (main thread) or undo the export's changes; returns operator status."""
+        if not self.succeeded(report):
+            return self.failed(report)
+        r = self.outcome.results[self.settings.estimator]
+        scene = self.bl_scene
+        s = scene.detp_bake
+        if s.apply_after_bake and "exr" in r.settings.formats:
+            uv = common.uv_layers([scene.objects[n] for n in self.objects if n in scene.objects])
+            blender.apply_all(scene, r.files, uv, r.settings.estimator)
+        summary = r.report()
+        s.last_report = json.dumps({"estimator": r.settings.estimator, "photons": summary["photons"],
+                                    "segments": summary["segments"], "objects": len(r.files),
+                                    "seconds": summary["seconds"], "files": r.files,
+                                    "noise": summary["noise"], "stopped_by": summary["stopped_by"],
+                                    "charts": {o["name"]: o["charts"] for o in summary["objects"] if "charts" in o},
+                                    "output_directory": self.out_dir})
+        total = sum(v for k, v in r.seconds.items() if k != "rasterise")
+        for warning in self.warnings:
+            report({"WARNING"}, warning)
+        report({"INFO"}, f"Baked {len(r.files)} lightmaps with {r.settings.estimator} in {total:.1f} s "
+                         f"({summary['photons']:,} photons) to {self.out_dir}")
+        return {"FINISHED"}

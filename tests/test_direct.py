@@ -6,7 +6,7 @@ import pytest
 from detp_bake.bake import BakeSettings, compute
 from detp_bake.direct import direct_irradiance
 from detp_bake.estimators import EstimatorSettings
-from detp_bake.photons import RayCaster
+from detp_bake.rays import RayCaster
 from detp_bake.scene import AreaLight, PointLight, SpotLight, SunLight
 from detp_bake.texel_area import SPAN, spread_reach
 from detp_bake.texels import rasterise
@@ -204,7 +204,7 @@ def test_a_bright_spot_in_the_map_lights_like_a_sun_from_where_cycles_puts_it(di
     # Which way it comes from: a wall facing the spot's world direction sees it, the wall's back
     # does not; with the Mapping rotation (90° about z) the spot moves from +y to R⁻¹·(+y) = +x.
     from detp_bake.direct import direct_irradiance
-    from detp_bake.photons import RayCaster
+    from detp_bake.rays import RayCaster
     from detp_bake.texels import rasterise
     uv = np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1.0]]])
     turn = np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1.0]])

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from detp_bake.estimators import Context, EstimatorSettings, create, disc_index
-from detp_bake.estimators.bvh import AXIS, CONE, HI, LO, build
+from detp_bake.bvh import AXIS, CONE, HI, LO, build
 from detp_bake.estimators.discs import make_discs
 from test_detp_exact import random_case, run, split
 
@@ -116,7 +116,7 @@ def test_tangent_clearance_casts_rays_only_where_they_can_hit_and_gets_the_same_
     """The compiled pre-test skips texels whose lifted disc meets no triangle: the result equals
     casting all eight rays from every texel (a plate with a ball resting on it and a wall)."""
     from detp_bake import texels as texels_mod
-    from detp_bake.photons import RayCaster
+    from detp_bake.rays import RayCaster
     from detp_bake.scene import PointLight
     from synthetic import grid, make_scene, uv_sphere
 

@@ -67,7 +67,7 @@ def test_fragments_are_the_narrow_charts_and_their_neighbours_see_each_other():
     one away from the plane's rim takes its NEIGHBOURS nearest texels in space (the 3σ disc holds
     more), whatever their chart: the texels of a disc √8 texels wide."""
     from detp_bake import fragments, texels as texels_mod
-    from detp_bake.photons import RayCaster
+    from detp_bake.rays import RayCaster
 
     scene = make_scene([("Plane", _charts(), 0.5, True)], [], resolution=RES)
     ts = texels_mod.rasterise(scene)

@@ -11,7 +11,7 @@ import pytest
 
 from detp_bake import denoise, texels as texels_mod, validity
 from detp_bake.bake import BakeSettings, compute
-from detp_bake.photons import RayCaster
+from detp_bake.rays import RayCaster
 from detp_bake.scene import SunLight
 from synthetic import box, grid, joined, make_scene, sealed_room
 

@@ -5,6 +5,7 @@ import json
 import bpy
 
 from ..detp_bake import estimators
+from ..operators import common
 
 
 class _Panel:
@@ -21,7 +22,6 @@ class DETPBAKE_PT_main(_Panel, bpy.types.Panel):
         layout = self.layout
         s = context.scene.detp_bake
         layout.prop(s, "estimator")
-        from ..operators import common
         active = common.ACTIVE
         if active is not None and active.job is not None:
             self.draw_running(layout, active)

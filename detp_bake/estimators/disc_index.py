@@ -27,9 +27,9 @@ import numba
 import numpy as np
 
 from . import Estimate, Estimator, patches, register
-from .bvh import AXIS, CONE, HI, LO, STACK_DEPTH, build
+from ..bvh import AXIS, CONE, HI, LO, STACK_DEPTH, build
 from .discs import crossing_weight, make_discs
-from .morton import segment_order
+from ..morton import segment_order
 from .patches import SIDE, form_patches, group_keys, mark_cut, patch_splat
 
 LEAF = 4  # discs per leaf

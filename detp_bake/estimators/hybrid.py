@@ -26,7 +26,7 @@ import numpy as np
 from . import Context, Estimate, Estimator, EstimatorSettings, register
 from .disc_index import DiscIndex
 from .discs import Discs, make_discs
-from .morton import morton_order
+from ..morton import morton_order
 from .sphere_cache import STREAM_SEGMENTS, SphereCache
 from ..errors import BakeError
 from ..texels import select

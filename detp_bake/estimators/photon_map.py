@@ -13,10 +13,10 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..photons import RayCaster
+from ..rays import RayCaster
 from ..validity import LIFT
 from . import Estimate, Estimator, register
-from .bvh import discs_meet_triangles
+from ..bvh import discs_meet_triangles
 
 CHUNK = 8192  # texels per k-NN query, bounds the (chunk, k, 3) gather
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from . import Estimate, Estimator, register
 from .discs import crossing_weight, make_discs
-from .morton import morton_order
+from ..morton import morton_order
 
 STREAM_SEGMENTS = 2_000_000
 CHUNK_TEXELS = 4096
