@@ -13,7 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Optional
 
-from . import sites
 
 MAX_PHOTONS = 1_000_000_000
 PHOTONS_PER_TEXEL = 16  # automatic photon count: this many per lightmap texel to bake ...
@@ -22,6 +21,7 @@ MAX_RESOLUTION = 16384
 MAX_BOUNCES = 1024
 MAX_DIRECT_SAMPLES = 4096
 MAX_SPACING = 8
+AUTO_SPACING, AUTO_FROM = 2, 256  # indirect spacing 0: every second texel on lightmaps of 256² and more (sites.py)
 MAX_MARGIN = 4096
 CONNECT_TIMEOUT = 10.0  # seconds to wait for a Dask scheduler and its first worker
 UV_LAYER = "Lightmap"  # the lightmap UV layer's default name
@@ -126,8 +126,8 @@ OPTIONS = (
            "sphere, sun disc, sky, emissive meshes); point lights need one",
            minimum=1, maximum=MAX_DIRECT_SAMPLES, soft_maximum=256),
     Option("indirect_spacing", int, 0, "Indirect Spacing", "With shadow rays for direct light: estimate indirect "
-           f"light every this many texels and blend between them (0: automatic, {sites.AUTO_SPACING} on lightmaps "
-           f"of {sites.AUTO_FROM}² and more; 1: every texel)", minimum=1, maximum=MAX_SPACING, auto=0,
+           f"light every this many texels and blend between them (0: automatic, {AUTO_SPACING} on lightmaps "
+           f"of {AUTO_FROM}² and more; 1: every texel)", minimum=1, maximum=MAX_SPACING, auto=0,
            metavar="TEXELS"),
     Option("target_noise", float, 0.0, "Noise Target", "Stop tracing once every lightmap's relative noise is at most "
            "this many per cent (0: off); Photons is then the most to trace", minimum=0.0, maximum=100.0,

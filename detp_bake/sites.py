@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
+from .options import AUTO_FROM, AUTO_SPACING
 from .texels import TexelSet
 
 NORMAL_COS = 0.9  # corners facing further away than about 25° are another surface
@@ -34,9 +35,7 @@ REACH = 2.0  # a corner further than REACH × spacing × texel size is another s
 # index is about as long over half the discs), so sites save the passes per texel: disc clearance
 # and rise, which grow with the texels. L-shaped room, against a 16M-photon bake, 2 cores: at 256²
 # 20 % less time and 0.4-1.6 % lower RMSE; at 128² 5-10 % less time and 2 % higher RMSE; at 64²
-# the same time and 3 % higher RMSE.
-AUTO_SPACING = 2
-AUTO_FROM = 256
+# the same time and 3 % higher RMSE. (Declared in options.py, with the setting.)
 
 
 @dataclass
