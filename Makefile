@@ -79,19 +79,18 @@ OUTPUT_SYNC := $(if $(filter output-sync,$(.FEATURES)),--output-sync=target,)
 test:
 	$(MAKE) --no-print-directory -j2 $(OUTPUT_SYNC) test-4.5-blender test-5.2
 
-# Extension zips, one per platform of blender_manifest.toml, each with the wheels of both Blender
-# lines (cp311 for 4.5, cp313 for 5.2; numpy is Blender's own): dist/detp_bake-<version>-<platform>.zip.
-# Built by Blender's own extension tool, which the bpy wheel ships as a standalone script.
+# Extension zips, one per Blender line and platform of blender_manifest.toml, each with that line's
+# wheels only (cp311 for 4.5, cp313 for 5.2; numpy is Blender's own):
+# dist/detp_bake-<version>-blender<line>-<platform>.zip. Built by Blender's own extension tool, which
+# the bpy wheel ships as a standalone script; the wheels are downloaded once into .cache/.
 BLENDER_EXT = $(firstword $(wildcard $(VENV45)/lib/python3.11/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py))
 EXT_ID := $(shell sed -n 's/^id *= *"\(.*\)"/\1/p' blender_manifest.toml)
 
 .PHONY: extension
 extension: $(VENV45)/.installed
 	@test -n "$(BLENDER_EXT)" || { echo "error: blender_ext.py not found in the bpy wheel of $(VENV45)"; exit 1; }
-	rm -rf wheels dist/$(EXT_ID)-*.zip && mkdir -p dist
-	$(VENV45)/bin/python tests/extension_build.py wheels wheels
-	$(VENV45)/bin/python $(BLENDER_EXT) validate .
-	$(VENV45)/bin/python $(BLENDER_EXT) build --split-platforms --source-dir . --output-dir dist
+	rm -rf dist/$(EXT_ID)-*.zip && mkdir -p dist
+	$(VENV45)/bin/python tests/extension_build.py zips dist $(BLENDER_EXT)
 	@ls -l dist/$(EXT_ID)-*.zip
 
 # Benchmarks (timings never live in tests): short runs take minutes on 2 cores, full ones hours.

@@ -55,12 +55,12 @@ def register():
     for module in _modules:
         module.register()
     if not bpy.app.background:  # interactive: compile the kernels now, not at the first click
-        from .detp_bake import warmup
+        from .detp_bake.run import warmup
         warmup.start()
 
 
 def unregister():
-    from .detp_bake import job, warmup
+    from .detp_bake.run import job, warmup
     running = job.running()
     if running is not None and hasattr(running, "cancel"):
         running.cancel()

@@ -1,4 +1,4 @@
-"""Throughput of distributed bakes (detp_bake/distributed.py) against the in-process bake. (Not
+"""Throughput of distributed bakes (detp_bake/run/distributed.py) against the in-process bake. (Not
 named distributed.py: with benchmarks/ first on sys.path it would shadow Dask's `distributed`.)
 
     python benchmarks/cluster.py [--photons N] [--workers 1 2 ...] [--estimator disc_index] [--json OUT]
@@ -24,8 +24,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import scenes  # noqa: E402  (puts the repository root on sys.path)
 
-from detp_bake.bake import BakeSettings, compute  # noqa: E402
-from detp_bake.distributed import Cluster  # noqa: E402
+from detp_bake.run.bake import BakeSettings, compute  # noqa: E402
+from detp_bake.run.distributed import Cluster  # noqa: E402
 
 
 def trace_seconds(result) -> float:

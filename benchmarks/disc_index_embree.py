@@ -42,8 +42,8 @@ from embreex.mesh_construction import TriangleMesh  # noqa: E402
 
 from detp_bake.estimators import Context, EstimatorSettings, create  # noqa: E402
 from detp_bake.estimators.discs import crossing_weight, make_discs  # noqa: E402
-from detp_bake.photons import PhotonBatch, PhotonTracer  # noqa: E402
-from detp_bake.texels import rasterise  # noqa: E402
+from detp_bake.transport.photons import PhotonBatch, PhotonTracer  # noqa: E402
+from detp_bake.lightmap.texels import rasterise  # noqa: E402
 
 THREADS = numba.get_num_threads()
 METHODS = ("disc_index", "disc_index_rule_a", "embree_rule_a", "embree_staggered")

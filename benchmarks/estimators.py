@@ -35,9 +35,9 @@ import scenes  # noqa: E402  (puts the repository root on sys.path)
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
-from detp_bake import texels as texels_mod  # noqa: E402
+from detp_bake.lightmap import texels as texels_mod  # noqa: E402
 from detp_bake.estimators import Context, EstimatorSettings, create  # noqa: E402
-from detp_bake.photons import PhotonTracer  # noqa: E402
+from detp_bake.transport.photons import PhotonTracer  # noqa: E402
 
 RADII = [0.5, 1.0, 1.5, 2.0, 4.0, 8.0]
 QS = [0.3, 0.4, 0.5, 0.6, 0.65, 0.7, 0.8, 0.9]
@@ -191,7 +191,7 @@ def _row(r, discs, segments, trace_seconds):
 
 def profile(resolutions, radii, photons, baseline, repeat):
     """disc_index on the Cornell box: every (lightmap size, segment set, radius), ours and the baseline's."""
-    from detp_bake.texels import tangent_clearance
+    from detp_bake.lightmap.texels import tangent_clearance
 
     methods = {"new": (create, tangent_clearance)}
     if baseline:
@@ -243,7 +243,7 @@ def profile(resolutions, radii, photons, baseline, repeat):
 
 def planes_texels(count, size):
     """`count` parallel 1 m² planes 1 m apart, each a size² lightmap: texels and their triangles."""
-    from detp_bake.texels import Lightmap, TexelSet
+    from detp_bake.lightmap.texels import Lightmap, TexelSet
 
     g = (np.arange(size) + 0.5) / size
     x, y = np.meshgrid(g, g, indexing="xy")
@@ -261,7 +261,7 @@ def planes_texels(count, size):
 def build_scale(planes, radii, baseline, repeat):
     """Seconds per million discs of the clearance pass and the build, on flat planes of texels."""
     from detp_bake.estimators.discs import SLAB, disc_radius
-    from detp_bake.texels import tangent_clearance
+    from detp_bake.lightmap.texels import tangent_clearance
 
     methods = {"new": (create, tangent_clearance)}
     if baseline:

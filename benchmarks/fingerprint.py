@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import scenes  # noqa: E402  (puts the repository root on sys.path)
 
 from detp_bake import estimators  # noqa: E402
-from detp_bake.bake import BakeSettings, compute_many  # noqa: E402
+from detp_bake.run.bake import BakeSettings, compute_many  # noqa: E402
 
 SCENES = ("cornell_box", "l_room", "window_room", "courtyard")
 

@@ -7,7 +7,7 @@ Every case is a fresh process (the bpy wheel: a new Blender session) that regist
 extension, opens the Cornell box and runs the Bake operator's job, timed from the click to the
 job's first "trace" progress event:
   cold           numba's cache empty: every kernel compiles at the click (a first session ever);
-  cold, warm-up  the same, but the extension's warm-up (detp_bake/warmup.py) ran when it was
+  cold, warm-up  the same, but the extension's warm-up (detp_bake/run/warmup.py) ran when it was
                  enabled and finished before the click;
   warm           the cache filled by an earlier session (the extension keeps it in its user
                  folder): kernels load at the click;
@@ -38,7 +38,7 @@ def child(photons: int, warm_up: bool) -> dict:
     from test_addon import _import_addon  # the repository root as the extension package
     addon = _import_addon()
     addon.register()
-    from detp_bake import job as job_mod, warmup
+    from detp_bake.run import job as job_mod, warmup
     from detp_bake_addon.operators.bake import BakeJob
     out = {"import_register": time.perf_counter() - t_start}
     bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_scenes" / "cornell_box.blend"))

@@ -22,9 +22,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import scenes  # noqa: E402  (puts the repository root on sys.path)
 
-from detp_bake import bake as bake_mod  # noqa: E402
+from detp_bake.run import bake as bake_mod  # noqa: E402
 from detp_bake.estimators import EstimatorSettings, FrameState  # noqa: E402
-from detp_bake.frames import find_motion, lights_signature, object_signatures, parse_frames  # noqa: E402
+from detp_bake.run.frames import find_motion, lights_signature, object_signatures, parse_frames  # noqa: E402
 
 NAMES = ("hybrid", "disc_index", "sphere_cache")
 COLUMNS = ("hybrid", "hybrid_di", "disc_index", "sphere_cache")  # hybrid_di: moving texels by a disc index

@@ -39,8 +39,8 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(scenes.ROOT / "tests"))
 from blender_helpers import lambert, sky_world  # noqa: E402  (the test suite's scene-making helpers)
 
-from detp_bake import denoise  # noqa: E402
-from detp_bake.bake import BakeSettings, compute  # noqa: E402
+from detp_bake.lightmap import denoise  # noqa: E402
+from detp_bake.run.bake import BakeSettings, compute  # noqa: E402
 
 SUN = (math.radians(50.0), 0.0, math.radians(35.0))  # rotation of the sun object
 SUN_STRENGTH = 3.0

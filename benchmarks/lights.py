@@ -26,9 +26,9 @@ import scenes  # noqa: E402  (puts the repository root on sys.path)
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
-from detp_bake.direct import direct_irradiance  # noqa: E402
+from detp_bake.transport.direct import direct_irradiance  # noqa: E402
 from detp_bake.rays import RayCaster  # noqa: E402
-from detp_bake.texels import rasterise  # noqa: E402
+from detp_bake.lightmap.texels import rasterise  # noqa: E402
 
 
 def main(argv=None):

@@ -57,7 +57,10 @@ def _scene(resolution: int, gutter: float = 0.05):
 
 
 def _child(estimator: str, resolution: int, photons: int, denoise: bool, gutter: float) -> dict:
-    from detp_bake import bake, denoise as denoise_mod, direct, estimators, memory, texels
+    from detp_bake.run import bake, memory
+    from detp_bake.lightmap import denoise as denoise_mod, texels
+    from detp_bake.transport import direct
+    from detp_bake import estimators
     from detp_bake.estimators import rise
 
     phase = ["setup"]

@@ -48,7 +48,7 @@ import scenes  # noqa: E402  (puts the repository root on sys.path)
 
 import numpy as np  # noqa: E402
 
-from detp_bake.bake import BakeSettings, compute  # noqa: E402
+from detp_bake.run.bake import BakeSettings, compute  # noqa: E402
 
 CONFIGS = {
     "default": dict(resolution=128, photons=16_000_000, paper_photons=8_000_000, spp=128, direct_spp=64),

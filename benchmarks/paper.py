@@ -27,7 +27,7 @@ from estimators import run, trace, warm_up  # noqa: E402
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
-from detp_bake import texels as texels_mod  # noqa: E402
+from detp_bake.lightmap import texels as texels_mod  # noqa: E402
 from detp_bake.estimators import Context  # noqa: E402
 
 CONFIGS = {

@@ -18,8 +18,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import scenes  # noqa: E402,F401  (puts the repository root on sys.path)
 
-from detp_bake import comparison, images, job as job_mod  # noqa: E402
-from detp_bake.bake import BakeSettings  # noqa: E402
+from detp_bake.run import comparison, job as job_mod
+from detp_bake.lightmap import images  # noqa: E402
+from detp_bake.run.bake import BakeSettings  # noqa: E402
 
 OBJECTS = ("Floor", "BackWall", "TallBox")
 TILE = 128

@@ -60,8 +60,8 @@ import scenes  # noqa: E402  (puts the repository root on sys.path)
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
-from detp_bake import denoise  # noqa: E402
-from detp_bake.bake import BakeSettings, compute  # noqa: E402
+from detp_bake.lightmap import denoise  # noqa: E402
+from detp_bake.run.bake import BakeSettings, compute  # noqa: E402
 
 TARGETS = (0.05, 0.03)
 STOP = 0.8 * min(TARGETS)  # a ladder whose error is below this has its times to the targets

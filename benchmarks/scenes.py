@@ -124,6 +124,6 @@ def dense_room(triangles: int = 100_000) -> Scene:
 
 def quiet_stdout():
     """Cycles prints a line per object and phase to the process's stdout (fd 1, from C): discard it
-    while a bake runs (detp_bake.output does the redirection)."""
-    from detp_bake.output import quiet_stdout as redirect
+    while a bake runs (detp_bake.cli.output does the redirection)."""
+    from detp_bake.cli.output import quiet_stdout as redirect
     return redirect(to="null")

@@ -1,4 +1,4 @@
-"""Sites (the indirect estimate on every second texel, detp_bake/sites.py) against every texel, by
+"""Sites (the indirect estimate on every second texel, detp_bake/lightmap/sites.py) against every texel, by
 lightmap size: wall seconds and error of the default bake with `indirect_spacing` 1 and 2.
 
     python benchmarks/sites.py [--scene l_room] [--resolutions 64,128,256] [--photons 250000,1000000]
@@ -26,7 +26,7 @@ import scenes  # noqa: E402  (puts the repository root on sys.path)
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
-from detp_bake.bake import BakeSettings, compute  # noqa: E402
+from detp_bake.run.bake import BakeSettings, compute  # noqa: E402
 
 ESTIMATOR = "disc_index"  # sites serve the disc estimators (the texel histogram estimates every texel)
 

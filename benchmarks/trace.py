@@ -30,7 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import scenes  # noqa: E402  (puts the repository root on sys.path)
 
-from detp_bake.photons import PhotonTracer  # noqa: E402
+from detp_bake.transport.photons import PhotonTracer  # noqa: E402
 from detp_bake.rays import RayCaster  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "trace.json"

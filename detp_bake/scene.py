@@ -14,8 +14,8 @@ import numpy as np
 from .errors import BakeError
 
 if TYPE_CHECKING:
-    from .environment import EnvironmentMap
-    from .textures import Textures
+    from .transport.environment import EnvironmentMap
+    from .transport.textures import Textures
 
 
 @dataclass

@@ -4,7 +4,7 @@ what there is, one undo step for the result. In background mode it runs at once.
 
 import bpy
 
-from ..detp_bake import job as job_mod
+from ..detp_bake.run import job as job_mod
 from ..detp_bake.errors import BakeError
 from . import common
 from .bake_frames import FramesBlenderJob

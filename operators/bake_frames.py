@@ -1,12 +1,13 @@
 """The Bake operator over a frame range (the panel's Frame Range): every frame is exported on the
-main thread first (bpy is not thread-safe), then a frames job (detp_bake/job.py) bakes them one
+main thread first (bpy is not thread-safe), then a frames job (detp_bake/run/job.py) bakes them one
 after the other on its worker; Esc keeps the frames already finished, as a shorter sequence. With
 Apply After Bake (and a step of 1) the lightmaps go on as image sequences that follow the timeline."""
 import json
 import time
 from dataclasses import replace
 
-from ..detp_bake import blender, frames, job as job_mod, memory
+from ..detp_bake import blender
+from ..detp_bake.run import frames, job as job_mod, memory
 from ..detp_bake.errors import BakeError
 from . import common
 from .job import BakeJob
@@ -36,7 +37,7 @@ class FramesBlenderJob(BakeJob):
         if not s.output_directory.strip() or (s.output_directory.startswith("//") and not context.blend_data.filepath):
             raise BakeError("setting 'output_directory' is relative to the .blend: save the file first "
                             "or choose an absolute folder")
-        from ..detp_bake import images
+        from ..detp_bake.lightmap import images
         images.check_writable_dir(self.out_dir)
         scenes = {}
         t0 = time.perf_counter()

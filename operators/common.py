@@ -2,8 +2,10 @@
 and a Blender scene exported for the core."""
 import bpy
 
-from ..detp_bake import blender, memory, options, texels
-from ..detp_bake.bake import BakeSettings
+from ..detp_bake import blender, options
+from ..detp_bake.run import memory
+from ..detp_bake.lightmap import texels
+from ..detp_bake.run.bake import BakeSettings
 
 
 def preferences(context):
@@ -18,7 +20,7 @@ def cluster(context):
     address = prefs.scheduler_address.strip() if prefs is not None else ""
     if not address:
         return contextlib.nullcontext()
-    from ..detp_bake.distributed import Cluster
+    from ..detp_bake.run.distributed import Cluster
     return Cluster(address)
 
 
@@ -81,8 +83,8 @@ ACTIVE = None  # the BlenderJob (operators/job.py) of the running bake or compar
 
 def idle(cls, context) -> bool:
     """The poll of every operator that runs a job: one job at a time per Blender session (two would
-    share numba's thread pool; detp_bake/job.py holds the lock), saying why when one runs."""
-    from ..detp_bake import job
+    share numba's thread pool; detp_bake/run/job.py holds the lock), saying why when one runs."""
+    from ..detp_bake.run import job
     busy = job.busy_message() or (f"a {ACTIVE.kind} is finishing" if ACTIVE is not None else None)
     if busy:
         cls.poll_message_set(busy)

@@ -1,4 +1,4 @@
-"""A core job (detp_bake/job.py) inside Blender: the main thread's half of it.
+"""A core job (detp_bake/run/job.py) inside Blender: the main thread's half of it.
 
 `prepare` checks and exports the scene; the job then runs on its worker; `handle` reads its
 events on the main thread (progress for the status bar and the panel, the live preview written
@@ -13,7 +13,9 @@ from dataclasses import replace
 
 import bpy
 
-from ..detp_bake import blender, images, job as job_mod
+from ..detp_bake import blender
+from ..detp_bake.lightmap import images
+from ..detp_bake.run import job as job_mod
 from ..detp_bake.errors import BakeError
 from . import common
 

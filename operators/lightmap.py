@@ -7,7 +7,8 @@ import bpy
 import numpy as np
 from bpy.props import EnumProperty
 
-from ..detp_bake import blender, images
+from ..detp_bake import blender
+from ..detp_bake.lightmap import images
 from ..detp_bake.errors import BakeError
 from . import common
 

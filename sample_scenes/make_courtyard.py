@@ -53,13 +53,13 @@ from mathutils import Vector
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-sys.path.insert(0, os.path.dirname(HERE))  # the repository root, for detp_bake.images
+sys.path.insert(0, os.path.dirname(HERE))  # the repository root, for detp_bake.lightmap.images
 from make_cornell_box import add_lightmap_uv, box_mesh  # noqa: E402
 from make_patio import box, quad_grid  # noqa: E402
 from make_tree import (MeshBuilder, add_camera, add_sun, make_material, save, set_render,  # noqa: E402
                        tube)
 
-from detp_bake.images import write_exr  # noqa: E402
+from detp_bake.lightmap.images import write_exr  # noqa: E402
 
 SEED = 8
 HALF_X, HALF_Y = 4.0, 3.0  # the floor; the walls stand outside it

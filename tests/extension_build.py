@@ -2,6 +2,7 @@
 and tests/test_extension.py. Not part of the extension (the build excludes tests/).
 
     python tests/extension_build.py wheels DEST   # download every wheel blender_manifest.toml lists
+    python tests/extension_build.py zips DIST     # one zip per Blender line and platform, with sizes
 
 Every wheel comes from `pip download --only-binary=:all: --no-deps --platform ... --python-version
 ...` with the pins of requirements/blender-<line>.txt, and the result must be exactly the manifest's
@@ -21,6 +22,9 @@ MANIFEST = ROOT / "blender_manifest.toml"
 
 # Blender LTS line -> the CPython it bundles.
 LINES = {"4.5": "3.11", "5.2": "3.13"}
+# Blender LTS line -> the Blender versions its zip installs on (min, max exclusive; None: no max):
+# the 4.5 line's wheels are built for CPython 3.11 and numpy 1.26, the 5.2 line's for 3.13 and numpy 2.
+LINE_VERSIONS = {"4.5": ("4.5.0", "5.0.0"), "5.2": ("5.2.0", None)}
 
 # What the extension imports at run time besides Blender's own numpy (bpy is Blender itself).
 RUNTIME = ("embreex", "OpenImageIO", "numba", "llvmlite", "scipy", "xatlas", "pyoidn")
@@ -147,9 +151,10 @@ def blender_ext_script(bpy_version_dir: Path) -> Path:
 _SKIP_AT_ROOT = {".git", ".cache", "build", "dist", "wheels", ".pytest_cache"}
 
 
-def stage_source(dst: Path, wheels: list[Path], platform: str) -> Path:
+def stage_source(dst: Path, wheels: list[Path], platform: str, line: str | None = None) -> Path:
     """A copy of the extension's source whose manifest lists only `wheels` and `platform`, with those
-    wheels in place: `blender_ext.py build --split-platforms` on it builds just that platform's zip."""
+    wheels in place: `blender_ext.py build --split-platforms` on it builds just that platform's zip.
+    `line`: the manifest also names the Blender versions of that line (LINE_VERSIONS)."""
     def ignore(directory, names):
         skip = {n for n in names if n == "__pycache__"}
         if Path(directory).resolve() == ROOT:
@@ -165,11 +170,39 @@ def stage_source(dst: Path, wheels: list[Path], platform: str) -> Path:
     text, n_w = re.subn(r"(?ms)^wheels\s*=\s*\[.*?\]", f"wheels = [{listed}\n]", text)
     text, n_p = re.subn(r"(?ms)^platforms\s*=\s*\[.*?\]", f'platforms = ["{platform}"]', text)
     assert n_w == 1 and n_p == 1, "blender_manifest.toml: expected one `wheels` and one `platforms` list"
+    if line is not None:
+        low, high = LINE_VERSIONS[line]
+        text, n_v = re.subn(r'(?m)^blender_version_min\s*=.*$', f'blender_version_min = "{low}"' +
+                            (f'\nblender_version_max = "{high}"' if high else ""), text)
+        assert n_v == 1, "blender_manifest.toml: expected one blender_version_min"
     (dst / "blender_manifest.toml").write_text(text)
     return dst
 
 
+def build_zips(dist: Path, blender_ext: Path, cache: Path) -> list[tuple[Path, int]]:
+    """One zip per Blender line and platform, each with that line's wheels only:
+    dist/<id>-<version>-blender<line>-<platform>.zip. Returns [(zip, bytes)]."""
+    import tempfile
+    info = manifest()
+    dist.mkdir(parents=True, exist_ok=True)
+    built = []
+    for line, python in LINES.items():
+        for platform in info["platforms"]:
+            wheels = download_cached(cache, python, platform)
+            with tempfile.TemporaryDirectory() as tmp:
+                src = stage_source(Path(tmp) / "src", wheels, platform, line)
+                out = dist / f"{info['id']}-{info['version']}-blender{line}-{platform}.zip"
+                subprocess.run([sys.executable, str(blender_ext), "build", "--source-dir", str(src),
+                                "--output-filepath", str(out)], check=True, stdout=subprocess.DEVNULL)
+            built.append((out, out.stat().st_size))
+            print(f"{out.name}: {out.stat().st_size / 1e6:.0f} MB", flush=True)
+    return built
+
+
 if __name__ == "__main__":
-    if len(sys.argv) != 3 or sys.argv[1] != "wheels":
+    if len(sys.argv) < 3 or sys.argv[1] not in ("wheels", "zips"):
         raise SystemExit(__doc__)
-    download_all(Path(sys.argv[2]))
+    if sys.argv[1] == "wheels":
+        download_all(Path(sys.argv[2]))
+    else:  # zips DIST BLENDER_EXT
+        build_zips(Path(sys.argv[2]), Path(sys.argv[3]), ROOT / ".cache" / "extension-wheels" / "all")

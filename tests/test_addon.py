@@ -160,7 +160,7 @@ def test_bake_operator_refuses_bad_settings_before_work(addon, cornell, bpy, tmp
 def test_cancel_at_each_phase_leaves_the_scene_unchanged(addon, empty_blend, bpy, tmp_path, phase):
     """The worker thread path of the modal operator, cancelled in each phase. The scene has no
     Lightmap UV layer, so the export creates one that a cancel must remove again."""
-    from detp_bake.job import Cancelled, Preview
+    from detp_bake.run.job import Cancelled, Preview
     from detp_bake_addon.operators.bake import BakeJob
     plane_object(bpy, "Floor", 2.0, (0, 0, 0))
     bpy.ops.object.light_add(type="SUN", location=(0, 0, 3))
@@ -310,7 +310,7 @@ def test_an_instance_selected_says_how_to_bake_it_and_hidden_meshes_that_render_
 def test_compare_and_bake_are_greyed_out_while_a_bake_runs(addon, cornell, bpy):
     """Two bakes at once would share numba's thread pool: while a job runs (the core's lock), or
     waits for its finish on the main thread, neither operator polls."""
-    from detp_bake import job as job_mod
+    from detp_bake.run import job as job_mod
     from detp_bake_addon.operators import common
     assert bpy.ops.detp_bake.compare.poll() and bpy.ops.detp_bake.bake.poll()
     holder = job_mod.hold("bake")
@@ -340,8 +340,8 @@ def test_live_preview_refines_the_materials_images_and_esc_restores_the_scene(ad
     """A background-mode job through the operator's job: after each batch the Floor's material
     shows the preview image, which changes; Stop and Keep ends it as a finished bake with the
     photons traced; a cancelled job puts every material back."""
-    from detp_bake import job as job_mod
-    from detp_bake.images import file_stem  # noqa: F401  (the core the add-on uses)
+    from detp_bake.run import job as job_mod
+    from detp_bake.lightmap.images import file_stem  # noqa: F401  (the core the add-on uses)
     from detp_bake_addon.operators.bake import BakeJob
     _small(cornell, tmp_path / "a", photons=500_000, live_preview_interval=0.1)
     before = scene_snapshot(bpy)
@@ -395,7 +395,7 @@ def test_the_panel_and_the_command_line_build_the_same_settings(addon, cornell, 
     """The same choices made in the panel (scene properties) and on the command line give equal
     BakeSettings, and every default is the core's own (options.py)."""
     from detp_bake import cli, options
-    from detp_bake.bake import BakeSettings
+    from detp_bake.run.bake import BakeSettings
 
     common = sys.modules[f"{PACKAGE}.operators.common"]
     s = bpy.context.scene.detp_bake

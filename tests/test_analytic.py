@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.estimators import EstimatorSettings
 from detp_bake.scene import PointLight, SunLight
 from synthetic import grid, make_scene, uv_sphere

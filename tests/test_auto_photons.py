@@ -1,8 +1,8 @@
 """The default photon count follows the texels to bake (bake.auto_photons), and the bake says so."""
 import numpy as np
 
-from detp_bake import bake as bake_mod
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run import bake as bake_mod
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.scene import PointLight
 from synthetic import grid, make_scene
 

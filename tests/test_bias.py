@@ -2,7 +2,7 @@
 neighbouring surface. Both estimators see the same photons (same seed and count)."""
 import numpy as np
 
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.estimators import EstimatorSettings
 from detp_bake.scene import SunLight
 from synthetic import grid, make_scene

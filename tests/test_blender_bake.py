@@ -8,9 +8,9 @@ import pytest
 from conftest import CORNELL
 from blender_helpers import export, plane_object, principled, relative_rmse, scene_snapshot, sky_world
 from detp_bake import blender
-from detp_bake.bake import BakeSettings, bake, compute
+from detp_bake.run.bake import BakeSettings, bake, compute
 from detp_bake.estimators import EstimatorSettings
-from detp_bake.photons import PhotonTracer
+from detp_bake.transport.photons import PhotonTracer
 
 
 def test_cornell_box_exports_as_saved(cornell, bpy):

@@ -1,8 +1,8 @@
 """Chart statistics of a lightmap (charts.py) and the warning for a fragmented unwrap."""
 import numpy as np
 
-from detp_bake import charts, texels as texels_mod
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.lightmap import charts, texels as texels_mod
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.scene import SunLight
 from synthetic import grid, make_scene
 

@@ -118,8 +118,8 @@ def test_missing_default_uv_layer_is_created_and_said(capsys, tmp_path, empty_bl
 def test_names_that_collide_as_file_names_get_distinct_files(tmp_path):
     """`Wall/1` and `Wall_1`, `Box` and `box` (case-insensitive disks), `..` and `...`, `CON`
     (Windows): every lightmap gets its own valid file, and report.json says which is whose."""
-    from detp_bake import images
-    from detp_bake.bake import BakeSettings, bake
+    from detp_bake.lightmap import images
+    from detp_bake.run.bake import BakeSettings, bake
     from detp_bake.scene import SunLight
     from synthetic import grid, make_scene
     names = ["Wall/1", "Wall_1", "Box", "box", "..", "...", "CON"]

@@ -13,7 +13,7 @@ from conftest import ROOT
 
 sys.path.insert(0, str(ROOT / "sample_scenes"))
 import make_courtyard  # noqa: E402
-from detp_bake import texels  # noqa: E402
+from detp_bake.lightmap import texels  # noqa: E402
 try:  # the exporter's render evaluation (what F12 renders), wherever it lives
     from detp_bake.blender.evaluation import render_evaluation  # noqa: E402
 except ImportError:

@@ -1,4 +1,4 @@
-"""Chart-aware OIDN denoising (detp_bake.denoise) on analytic irradiance fields with known noise.
+"""Chart-aware OIDN denoising (detp_bake.lightmap.denoise) on analytic irradiance fields with known noise.
 
 Noise model: a photon count's noise, σ(E) = level · √(E · Ē), the same draw in all three channels
 (one light, one set of photons), 0 in the gutter as a bake leaves it. Fixed seeds throughout.
@@ -9,7 +9,7 @@ import numpy as np
 import pyoidn
 import pytest
 
-from detp_bake import denoise
+from detp_bake.lightmap import denoise
 from detp_bake.errors import BakeError
 
 TINT = np.array([1.0, 0.85, 0.7], np.float32)
@@ -226,7 +226,7 @@ def test_sharp_lights_are_not_denoised():
     """Point and sun light (bake._finish keeps their part as the shadow rays give it): with nothing
     else to denoise (no bounce, no sky), the denoised lightmap is the raw one (to float32 rounding);
     add a sky and only the sky's part moves."""
-    from detp_bake.bake import BakeSettings, compute
+    from detp_bake.run.bake import BakeSettings, compute
     from detp_bake.scene import PointLight, SunLight
     from synthetic import box, grid, joined, make_scene
 
@@ -246,8 +246,8 @@ def test_sharp_lights_are_not_denoised():
 def test_big_lightmaps_denoise_soft_and_indirect_light_in_one_run(monkeypatch):
     """From bake.ONE_PASS_FROM pixels the sky's light and the indirect light go through OIDN together:
     one run instead of two (the sun's light is kept, not denoised); the energy is the same."""
-    from detp_bake import bake as bake_mod
-    from detp_bake.bake import BakeSettings, compute
+    from detp_bake.run import bake as bake_mod
+    from detp_bake.run.bake import BakeSettings, compute
     from detp_bake.scene import SunLight
     from synthetic import box, grid, make_scene
 

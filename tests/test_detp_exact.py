@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from detp_bake.estimators import Context, EstimatorSettings, create
-from detp_bake.photons import PhotonBatch
-from detp_bake.texels import Lightmap, TexelSet
+from detp_bake.transport.photons import PhotonBatch
+from detp_bake.lightmap.texels import Lightmap, TexelSet
 
 
 def random_case(seed, n_discs=600, n_segments=6000):
@@ -108,7 +108,7 @@ def test_segments_ending_on_the_disc_plane_count_and_back_faces_do_not():
 def test_all_three_agree_on_a_real_bake_with_chart_borders():
     """Texels from rasterised charts (border texels only partly covered, discs overhanging the
     chart) and photons traced with bounces: the three DETP estimators give the same lightmap."""
-    from detp_bake.bake import BakeSettings, compute
+    from detp_bake.run.bake import BakeSettings, compute
     from detp_bake.scene import PointLight
     from synthetic import grid, make_scene, uv_sphere
 

@@ -3,13 +3,13 @@ and against the photons' own estimate of the same light."""
 import numpy as np
 import pytest
 
-from detp_bake.bake import BakeSettings, compute
-from detp_bake.direct import direct_irradiance
+from detp_bake.run.bake import BakeSettings, compute
+from detp_bake.transport.direct import direct_irradiance
 from detp_bake.estimators import EstimatorSettings
 from detp_bake.rays import RayCaster
 from detp_bake.scene import AreaLight, PointLight, SpotLight, SunLight
-from detp_bake.texel_area import SPAN, spread_reach
-from detp_bake.texels import rasterise
+from detp_bake.lightmap.texel_area import SPAN, spread_reach
+from detp_bake.lightmap.texels import rasterise
 from synthetic import grid, make_scene, uv_sphere
 
 
@@ -170,7 +170,7 @@ def test_bad_direct_settings_are_refused(setting, value):
 
 
 def _env(image, rotation=np.eye(3)):
-    from detp_bake.environment import EnvironmentMap
+    from detp_bake.transport.environment import EnvironmentMap
     return EnvironmentMap(np.asarray(image, np.float32), np.asarray(rotation, float))
 
 
@@ -203,9 +203,9 @@ def test_a_bright_spot_in_the_map_lights_like_a_sun_from_where_cycles_puts_it(di
     assert np.isclose(r.value[:, 0].mean() * np.pi, e_spot, rtol=0.03)
     # Which way it comes from: a wall facing the spot's world direction sees it, the wall's back
     # does not; with the Mapping rotation (90° about z) the spot moves from +y to R⁻¹·(+y) = +x.
-    from detp_bake.direct import direct_irradiance
+    from detp_bake.transport.direct import direct_irradiance
     from detp_bake.rays import RayCaster
-    from detp_bake.texels import rasterise
+    from detp_bake.lightmap.texels import rasterise
     uv = np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1.0]]])
     turn = np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1.0]])
     for rotation, towards in ((np.eye(3), [0, 1.0, 0]), (turn, [1.0, 0, 0])):

@@ -7,7 +7,7 @@ import pytest
 
 from conftest import ROOT
 from blender_helpers import export
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run.bake import BakeSettings, compute
 
 PHOTONS = 1_000_000  # the two means agree to 0.2-0.4 % here (seeds 5, 6; 0.1 % apart)
 RESOLUTION = 32

@@ -15,10 +15,10 @@ def _real_case(radius_texels, resolution=20, photons=200_000):
     """A plate and a ball with rasterised charts, photons traced with indirect_only (the segments
     after the first bounce, as a sampled-direct bake feeds them), discs cut by tangent clearance,
     slabs cut to their own surface's rise (flat on the plate, curved on the ball)."""
-    from detp_bake import texels as texels_mod
+    from detp_bake.lightmap import texels as texels_mod
     from detp_bake.estimators.discs import SLAB, disc_radius
     from detp_bake.estimators.rise import own_surface_rise
-    from detp_bake.photons import PhotonTracer
+    from detp_bake.transport.photons import PhotonTracer
     from detp_bake.scene import PointLight
     from synthetic import grid, make_scene, uv_sphere
 
@@ -115,7 +115,7 @@ def test_same_estimate_on_any_thread_count_and_when_binning_overflows(monkeypatc
 def test_tangent_clearance_casts_rays_only_where_they_can_hit_and_gets_the_same_answer():
     """The compiled pre-test skips texels whose lifted disc meets no triangle: the result equals
     casting all eight rays from every texel (a plate with a ball resting on it and a wall)."""
-    from detp_bake import texels as texels_mod
+    from detp_bake.lightmap import texels as texels_mod
     from detp_bake.rays import RayCaster
     from detp_bake.scene import PointLight
     from synthetic import grid, make_scene, uv_sphere
@@ -152,8 +152,8 @@ def _lattice_case(seed, n_segments=6000, noise=0.0):
     """Texels of three flat lightmaps (one tilted, one with holes, one with 1e-13 noise, all moved
     in their plane by `noise` texels more) and segments aimed at their discs' rims: ending on the
     plane, through it, in and just past the slab, grazing, arriving from behind."""
-    from detp_bake.photons import PhotonBatch
-    from detp_bake.texels import Lightmap, TexelSet
+    from detp_bake.transport.photons import PhotonBatch
+    from detp_bake.lightmap.texels import Lightmap, TexelSet
 
     rng = np.random.default_rng(seed)
     size, texel = 40, 0.05

@@ -14,10 +14,10 @@ import pytest
 pytest.importorskip("distributed")
 
 from conftest import CORNELL, ROOT  # noqa: E402
-from detp_bake import texels as texels_mod  # noqa: E402
-from detp_bake.bake import BakeSettings, Progress, TraceJob, compute  # noqa: E402
+from detp_bake.lightmap import texels as texels_mod  # noqa: E402
+from detp_bake.run.bake import BakeSettings, Progress, TraceJob, compute  # noqa: E402
 from detp_bake.cli import main  # noqa: E402
-from detp_bake.distributed import Cluster  # noqa: E402
+from detp_bake.run.distributed import Cluster  # noqa: E402
 from detp_bake.errors import BakeError  # noqa: E402
 from detp_bake.estimators import Context, EstimatorSettings  # noqa: E402
 from detp_bake.scene import PointLight  # noqa: E402
@@ -50,7 +50,7 @@ def _same(a, b):
 
 
 def test_a_local_bake_imports_no_dask():
-    code = ("import sys, detp_bake.bake, detp_bake.cli, detp_bake.distributed, detp_bake.estimators as e; "
+    code = ("import sys, detp_bake.run.bake, detp_bake.cli, detp_bake.run.distributed, detp_bake.estimators as e; "
             "e.names(); bad = [m for m in sys.modules if m.split('.')[0] in ('dask', 'distributed')]; "
             "assert not bad, bad")
     proc = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, PYTHONPATH=str(ROOT)),
@@ -152,7 +152,7 @@ def test_the_preferences_button_reports_the_workers_and_their_cores(cluster, bpy
 
 
 def test_cancel_cancels_the_units_still_out_and_writes_nothing(cluster, tmp_path):
-    from detp_bake.bake import bake
+    from detp_bake.run.bake import bake
     from detp_bake.errors import BakeCancelled
     import threading
     cancel = threading.Event()
@@ -186,31 +186,32 @@ def test_units_are_sized_by_the_workers_memory_limit(cluster):
 
 
 def test_the_core_uploaded_to_a_worker_imports_without_blender(tmp_path):
-    from detp_bake.distributed import core_bootstrap
+    from detp_bake.run.distributed import core_bootstrap
     source, digest = core_bootstrap()
     (tmp_path / "boot.py").write_text(source)
-    code = ("import sys, boot, detp_bake.distributed, detp_bake.bake, os; "
+    code = ("import sys, boot, detp_bake.run.distributed, detp_bake.run.bake, os; "
             "assert detp_bake.__file__.startswith(boot._HOME), detp_bake.__file__; "
             "assert not os.path.exists(os.path.join(boot._HOME, 'detp_bake', 'blender')); "
             "assert 'bpy' not in sys.modules")
     env = dict(os.environ, PYTHONPATH=str(tmp_path), TMPDIR=str(tmp_path))
     proc = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    assert (tmp_path / f"detp_bake_core_{digest}" / "detp_bake" / "photons.py").is_file()
+    assert (tmp_path / f"detp_bake_core_{digest}" / "detp_bake" / "transport" / "photons.py").is_file()
 
 
 def test_classes_travel_by_their_core_name_from_blenders_package_path(monkeypatch):
     """In Blender the core is bl_ext.<repo>.detp_bake.detp_bake: what the client pickles must
     name detp_bake.… for workers that have the core alone."""
     import pickle
-    from detp_bake import distributed, scene
+    from detp_bake.run import distributed
+    from detp_bake import scene
     prefix = "bl_ext.user_default.detp_bake.detp_bake"
     monkeypatch.setattr(distributed, "_PREFIX", prefix)
     stand_in = type("BakeObject", (), {"__module__": prefix + ".scene"})
 
     def run_unit():
         pass
-    run_unit.__module__, run_unit.__qualname__ = prefix + ".distributed", "run_unit"
+    run_unit.__module__, run_unit.__qualname__ = prefix + ".run.distributed", "run_unit"
     data = distributed._dumps({"object": stand_in, "function": run_unit, "run": distributed._by_name(run_unit)})
     assert b"bl_ext" not in data
     back = pickle.loads(data)

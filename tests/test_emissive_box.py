@@ -12,7 +12,7 @@ import numpy as np
 
 from blender_helpers import export, lambert, plane_object
 from detp_bake import blender
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run.bake import BakeSettings, compute
 
 FACES = {"+x": (1, 0, 0), "-x (by a wall)": (-1, 0, 0), "+y (by a wall)": (0, 1, 0), "-y": (0, -1, 0),
          "top": (0, 0, 1), "bottom (on the floor)": (0, 0, -1)}

@@ -11,6 +11,7 @@ import os
 import platform
 import subprocess
 import sys
+import tomllib
 import zipfile
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from conftest import CORNELL, ROOT
 PY = f"{sys.version_info.major}.{sys.version_info.minor}"
 # One folder per Python: the two Blender lines' suites may run at once (make test).
 WHEEL_CACHE = ROOT / ".cache" / "extension-wheels" / f"py{sys.version_info.major}{sys.version_info.minor}"
+LINE = next(line for line, py in eb.LINES.items() if py == PY)
 HOST = {("linux", "x86_64"): "linux-x64", ("win32", "AMD64"): "windows-x64",
         ("darwin", "arm64"): "macos-arm64"}.get((sys.platform, platform.machine()))
 
@@ -69,7 +71,7 @@ def built_zip(bpy, tmp_path_factory):
         pytest.skip(f"the extension ships no zip for this machine ({sys.platform}, {platform.machine()})")
     wheels = eb.download_cached(WHEEL_CACHE, PY, HOST)
     tmp = tmp_path_factory.mktemp("extension")
-    src = eb.stage_source(tmp / "src", wheels, HOST)
+    src = eb.stage_source(tmp / "src", wheels, HOST, LINE)
     proc = _run(_blender_ext(bpy), "build", "--split-platforms", "--source-dir", src, "--output-dir", tmp)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     path = tmp / f"{eb.manifest()['id']}-{eb.manifest()['version']}-{HOST.replace('-', '_')}.zip"
@@ -79,7 +81,7 @@ def built_zip(bpy, tmp_path_factory):
 
 def test_zip_holds_the_add_on_and_this_pythons_wheels_only(bpy, built_zip):
     names = zipfile.ZipFile(built_zip).namelist()
-    assert {"__init__.py", "blender_manifest.toml", "detp_bake/bake.py", "operators/bake.py",
+    assert {"__init__.py", "blender_manifest.toml", "detp_bake/run/bake.py", "operators/bake.py",
             "ui/properties.py"} <= set(names)
     assert sorted(n for n in names if n.startswith("wheels/")) == \
         sorted(f"wheels/{Path(w).name}" for w in eb.manifest_wheels(PY, HOST))
@@ -89,6 +91,10 @@ def test_zip_holds_the_add_on_and_this_pythons_wheels_only(bpy, built_zip):
         assert "__pycache__" not in name and not name.endswith((".pyc", ".nbi", ".nbc", ".blend")), name
     proc = _run(_blender_ext(bpy), "validate", built_zip)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    # One Blender line's zip: it says which Blender versions its wheels serve.
+    manifest = tomllib.loads(zipfile.ZipFile(built_zip).read("blender_manifest.toml").decode())
+    low, high = eb.LINE_VERSIONS[LINE]
+    assert manifest["blender_version_min"] == low and manifest.get("blender_version_max") == high
 
 
 def _blender_like_site(bpy, dst: Path) -> Path:

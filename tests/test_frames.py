@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from detp_bake import frames
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run import frames
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.errors import BakeError
 from detp_bake.estimators import EstimatorSettings
 from test_hybrid import CENTRES, scene_at
@@ -68,7 +68,7 @@ def test_a_range_writes_numbered_lightmaps_and_a_report_per_frame(tmp_path):
         assert {"export", "trace", "estimate", "write"} <= set(s["seconds"])
     # Each frame is the bake of that frame alone (frame ranges estimate every texel: sites.py).
     alone = compute(scene_at(1), _settings(estimator="disc_index", indirect_spacing=1))
-    from detp_bake.images import read_image
+    from detp_bake.lightmap.images import read_image
     img = read_image(tmp_path / "Plate.hybrid.0002.exr")
     assert np.allclose(img[..., :3], alone.images["Plate"], rtol=1e-5, atol=1e-7)
 
@@ -104,7 +104,7 @@ def test_texels_no_changed_path_reaches_are_identical_between_frames(tmp_path, d
     got = frames.bake_frames(lambda f: scene_at(f, bounces=0), frames.parse_frames("0-1"),
                              _settings(direct=direct), tmp_path)
     assert got.frames == [0, 1]
-    from detp_bake.images import read_image
+    from detp_bake.lightmap.images import read_image
     probe = compute(scene_at(0, bounces=0), _settings(direct=direct))  # texel positions and disc radii
     lamp = np.array([0.3, -0.4, 1.6])
     identical = checked = 0
@@ -129,7 +129,7 @@ def test_direct_light_is_resampled_only_where_a_mover_can_shadow(tmp_path):
     and most static texels are not re-sampled."""
     got = frames.bake_frames(lambda f: scene_at(f, bounces=0), frames.parse_frames("0-2"),
                              _settings(direct="sampled"), tmp_path)
-    from detp_bake.images import read_image
+    from detp_bake.lightmap.images import read_image
     sections = json.loads((tmp_path / "report.json").read_text())["per_frame"]
     for frame, section in zip(got.frames, sections):
         fresh = compute(scene_at(frame, bounces=0), _settings(direct="sampled"))

@@ -90,7 +90,7 @@ def test_first_and_a_later_frame_match_cycles(tmp_path, capsys, bpy):
     within 3 % (the floor under the moving box, the box itself, the table; measured 0.984-1.015,
     where the box's own mean differs by 9 % between the two frames)."""
     from detp_bake import blender
-    from detp_bake.images import read_image
+    from detp_bake.lightmap.images import read_image
 
     out = tmp_path / "out"
     names = ["Floor", "Mover", "Table"]

@@ -3,7 +3,7 @@ oracle, with the static discs indexed once for the whole range."""
 import numpy as np
 import pytest
 
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.estimators import EstimatorSettings, FrameState
 from detp_bake.scene import PointLight
 from synthetic import grid, make_scene, uv_sphere

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from detp_bake import incremental, job as job_mod
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run import incremental, job as job_mod
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.estimators import EstimatorSettings
 from detp_bake.scene import AreaLight, PointLight, SunLight
 from synthetic import grid, make_scene, uv_sphere

@@ -1,4 +1,4 @@
-"""The job every front end runs (detp_bake/job.py): its events for a bake, a cancel in each phase,
+"""The job every front end runs (detp_bake/run/job.py): its events for a bake, a cancel in each phase,
 an error and a comparison; the lock; Stop and keep; the live preview against a bake without it.
 No Blender: a plane under a point light, built as arrays."""
 import json
@@ -6,8 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from detp_bake import job as job_mod
-from detp_bake.bake import BakeSettings
+from detp_bake.run import job as job_mod
+from detp_bake.run.bake import BakeSettings
 from detp_bake.estimators import EstimatorSettings
 from detp_bake.scene import PointLight
 from synthetic import grid, make_scene
@@ -169,7 +169,7 @@ def test_the_photon_map_previews_its_gather_so_far_and_ends_as_a_bake_without_pr
 def test_a_job_started_during_the_warm_up_waits_for_it_and_then_runs(tmp_path):
     """The warm-up (every kernel compiled on a tiny scene) holds the lock without refusing jobs:
     a bake clicked meanwhile starts once it is done; a second warm-up does not start."""
-    from detp_bake import warmup
+    from detp_bake.run import warmup
     assert warmup.start() is not None
     try:
         assert job_mod.warming() and job_mod.busy_message() is None  # the buttons stay live

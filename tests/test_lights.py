@@ -4,7 +4,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from detp_bake import lights
+from detp_bake.transport import lights
 from detp_bake.errors import BakeError
 from detp_bake.scene import AreaLight, PointLight, SpotLight, SunLight
 from synthetic import grid, make_scene
@@ -78,9 +78,9 @@ def test_allocation_is_proportional_and_complete():
 def test_sun_photons_start_on_the_footprint_and_nearly_all_hit():
     """A 1 m plate in a scene whose bounds are stretched by a far point light: sun photons start
     on the plate's footprint, so almost all of them land, and the irradiance is unchanged."""
-    from detp_bake.bake import BakeSettings, compute
+    from detp_bake.run.bake import BakeSettings, compute
     from detp_bake.estimators import EstimatorSettings
-    from detp_bake.photons import PhotonTracer
+    from detp_bake.transport.photons import PhotonTracer
     from synthetic import grid, make_scene
     tilt = np.radians(40)
     sun = SunLight("Sun", np.array([0.0, np.sin(tilt), -np.cos(tilt)]), np.full(3, 2.0))

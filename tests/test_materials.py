@@ -5,7 +5,7 @@ import pytest
 
 from blender_helpers import export, plane_object, principled
 from detp_bake import blender
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.estimators import EstimatorSettings
 
 

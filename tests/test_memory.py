@@ -8,8 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from detp_bake import memory
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run import memory
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.errors import BakeError
 from detp_bake.scene import PointLight, SunLight
 from conftest import ROOT

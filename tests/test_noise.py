@@ -3,11 +3,11 @@ the batch schedule that makes an early stop unbiased."""
 import numpy as np
 import pytest
 
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.estimators import EstimatorSettings
-from detp_bake.lights import build_emitters
+from detp_bake.transport.lights import build_emitters
 from detp_bake.scene import PointLight, SunLight
-from detp_bake.schedule import BatchSchedule
+from detp_bake.transport.schedule import BatchSchedule
 from synthetic import grid, make_scene, uv_sphere
 
 RADIUS, RHO, POWER, BOUNCES = 1.0, 0.5, 100.0, 4
@@ -89,7 +89,7 @@ def test_the_threads_setting_reaches_the_compiled_estimators():
     """threads=1 runs numba's parallel loops on one thread for the bake, and leaves the setting
     as it was afterwards; the result is the same bit for bit as on all threads."""
     import numba
-    from detp_bake import bake as bake_mod
+    from detp_bake.run import bake as bake_mod
     seen = []
     original = bake_mod._compute_many
 

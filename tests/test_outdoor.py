@@ -21,7 +21,7 @@ import pytest
 
 from blender_helpers import export, lambert, sky_world
 from detp_bake import blender
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.scene import SunLight
 from synthetic import grid, make_scene
 

@@ -5,7 +5,7 @@ Each Blender case is one small scene compared with Cycles' own bake in the same 
 import numpy as np
 import pytest
 
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.errors import BakeError
 from detp_bake.estimators import EstimatorSettings
 from detp_bake.scene import PointLight, SunLight
@@ -41,7 +41,7 @@ def test_negative_light_subtracts_analytically(direct):
 
 
 def test_photon_counts_follow_absolute_flux():
-    from detp_bake import lights
+    from detp_bake.transport import lights
     sc = make_scene([("Plane", grid(2.0, 2.0, 2), 0.5, True)],
                     [PointLight("Plus", np.array([0, 0, 1.0]), np.full(3, 30.0)),
                      PointLight("Minus", np.array([0.5, 0, 1.0]), np.full(3, -10.0))])

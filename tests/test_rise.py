@@ -8,7 +8,7 @@ from detp_bake.estimators import EstimatorSettings
 from detp_bake.estimators.discs import CLEARANCE_FLOOR, make_discs
 from detp_bake.estimators.rise import own_surface_rise, piece_extent, welded_pieces
 from detp_bake.scene import PointLight
-from detp_bake.texels import rasterise
+from detp_bake.lightmap.texels import rasterise
 from synthetic import grid, make_scene, uv_sphere
 
 LAMP = [PointLight("Lamp", np.zeros(3), np.full(3, 1.0))]

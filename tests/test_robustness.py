@@ -80,7 +80,7 @@ def test_a_full_disk_leaves_no_partial_file(tmp_path, empty_blend, bpy):
     """The file size limit (RLIMIT_FSIZE) makes every write past 512 bytes fail as a full disk would:
     the bake says which folder, and neither a 0-byte nor a half-written image is left."""
     from blender_helpers import export, plane_object
-    from detp_bake import bake
+    from detp_bake.run import bake
     from detp_bake.errors import BakeError
     plane_object(bpy, "Floor", 2.0, (0, 0, 0))
     bpy.ops.object.light_add(type="POINT", location=(0.3, 0, 0.5))  # a gradient: no tiny constant image
@@ -201,7 +201,7 @@ def test_a_scene_10_km_from_the_origin_bakes_as_it_does_at_the_origin(tmp_path, 
     """float32 rays, texels and discs work in coordinates relative to the scene's centre: the
     same room moved 10 km away reads within 0.5 % of the room at the origin, lightmap by lightmap."""
     from blender_helpers import export
-    from detp_bake.bake import BakeSettings, compute
+    from detp_bake.run.bake import BakeSettings, compute
     _room(bpy, tmp_path / "room.blend", lightmap_uv=True)
     settings = BakeSettings(estimator=estimator, photons=60000, resolution=16, bounces=2, denoise=False)
     near = compute(export(bpy, resolution=16), settings)

@@ -11,7 +11,8 @@ sys.path.insert(0, str(ROOT / "sample_scenes"))
 import make_patio  # noqa: E402
 import make_quasi_static  # noqa: E402
 import make_tree  # noqa: E402
-from detp_bake import blender, texels  # noqa: E402
+from detp_bake import blender
+from detp_bake.lightmap import texels  # noqa: E402
 
 SCENES = {  # name: (build function, target triangles, mesh objects)
     "tree": (make_tree.build_tree, 72_500, 15),

@@ -11,7 +11,7 @@ irradiance of a point light; every photon goes through the estimator (direct='ph
 import numpy as np
 import pytest
 
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.scene import PointLight
 from synthetic import grid, make_scene, shuffled_charts
 
@@ -66,7 +66,7 @@ def test_fragments_are_the_narrow_charts_and_their_neighbours_see_each_other():
     """fragments.find on the shuffled plane: every texel is a fragment (4-texel charts), and each
     one away from the plane's rim takes its NEIGHBOURS nearest texels in space (the 3σ disc holds
     more), whatever their chart: the texels of a disc √8 texels wide."""
-    from detp_bake import fragments, texels as texels_mod
+    from detp_bake.lightmap import fragments, texels as texels_mod
     from detp_bake.rays import RayCaster
 
     scene = make_scene([("Plane", _charts(), 0.5, True)], [], resolution=RES)
@@ -113,8 +113,8 @@ def test_a_region_made_only_of_fragments_is_left_to_them():
     """denoise_lightmap with regions (validity.regions) where one region's texels are all
     fragments: OIDN runs on the other region only, and each fragment texel takes its neighbours'
     weighted mean (here: itself and the texel to its right, weights 3 and 1)."""
-    from detp_bake import denoise
-    from detp_bake.fragments import Fragments
+    from detp_bake.lightmap import denoise
+    from detp_bake.lightmap.fragments import Fragments
 
     rng = np.random.default_rng(0)
     img = (1.0 + 0.1 * rng.standard_normal((16, 16, 3))).astype(np.float32)

@@ -12,7 +12,7 @@ import pytest
 
 from blender_helpers import export, lambert, plane_object, sky_world
 from detp_bake import blender
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run.bake import BakeSettings, compute
 
 RES = 64  # 4 m ground: 6.25 cm texels
 SUN = 3.0

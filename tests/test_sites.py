@@ -5,8 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from detp_bake import sites, texels
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.lightmap import sites, texels
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.errors import BakeError
 from detp_bake.estimators.discs import disc_radius
 from detp_bake.estimators import EstimatorSettings

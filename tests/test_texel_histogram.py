@@ -2,9 +2,9 @@
 alone (a plane whose UVs map x, y linearly), and its sums through take/absorb."""
 import numpy as np
 
-from detp_bake import texels as texels_mod
+from detp_bake.lightmap import texels as texels_mod
 from detp_bake.estimators import Context, EstimatorSettings, create
-from detp_bake.photons import PhotonTracer
+from detp_bake.transport.photons import PhotonTracer
 from detp_bake.scene import PointLight
 from synthetic import grid, make_scene
 
@@ -77,7 +77,7 @@ def test_cut_out_surfaces_count_every_arrival():
     """A floor that stops half the light (opacity 0.5) lets half its photons through: each landing
     counts twice, so the flux through the floor is the lamp's share of the solid angle,
     P·Ω/(4π) with Ω = 4·asin(a²/(a² + h²)) for a square of half-side a under it at height h."""
-    from detp_bake.bake import BakeSettings, compute
+    from detp_bake.run.bake import BakeSettings, compute
     power, h, a = 20.0, 1.0, SIZE / 2
     sc = make_scene([("Floor", grid(SIZE, SIZE, 4), 0.5, True)],
                     [PointLight("Lamp", np.array([0.0, 0.0, h]), np.full(3, power))], resolution=RES)
@@ -93,7 +93,7 @@ def test_cut_out_surfaces_count_every_arrival():
 
 
 def test_a_default_bake_denoises_its_direct_and_indirect_parts_apart_and_keeps_the_energy():
-    from detp_bake.bake import BakeSettings, compute
+    from detp_bake.run.bake import BakeSettings, compute
     sc = make_scene([("Floor", grid(SIZE, SIZE, 4), 0.8, True),
                      ("Ceiling", grid(SIZE, SIZE, 4, z=1.0, flip=True), 0.8, True)],
                     [PointLight("Lamp", np.array([0.3, -0.2, 0.5]), np.full(3, 20.0))], resolution=16, bounces=2)
@@ -110,7 +110,7 @@ def test_a_default_bake_denoises_its_direct_and_indirect_parts_apart_and_keeps_t
 def test_smooth_shading_counts_by_the_shading_normal_as_cycles_does():
     """A flat plate whose shading normals lean 30° from its face, under a sun straight down: Cycles
     takes the cosine to the shading normal, E = S·cos 30°, though S W/m² land on the face."""
-    from detp_bake.bake import BakeSettings, compute
+    from detp_bake.run.bake import BakeSettings, compute
     from detp_bake.scene import SunLight
     s, lean = 3.0, np.radians(30.0)
     pos, nrm, uv = grid(SIZE, SIZE, 4)

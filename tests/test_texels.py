@@ -1,7 +1,7 @@
 """Texel rasterisation and dilation, checked against geometry computed by hand."""
 import numpy as np
 
-from detp_bake import texels
+from detp_bake.lightmap import texels
 from detp_bake.scene import PointLight
 from synthetic import grid, make_scene
 

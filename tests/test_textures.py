@@ -3,11 +3,11 @@ them, colour that bounces, and light through alpha, checked against closed forms
 import numpy as np
 import pytest
 
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.estimators import EstimatorSettings
-from detp_bake.photons import PhotonTracer
+from detp_bake.transport.photons import PhotonTracer
 from detp_bake.scene import PointLight, SunLight
-from detp_bake.textures import CLIP, CLOSEST, EXTEND, LINEAR, REPEAT, Textures, sample, srgb_to_linear
+from detp_bake.transport.textures import CLIP, CLOSEST, EXTEND, LINEAR, REPEAT, Textures, sample, srgb_to_linear
 from synthetic import grid, make_scene, uv_sphere
 
 

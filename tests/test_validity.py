@@ -9,8 +9,8 @@ across the wall, and landings on the outer strip of a rim texel's square), and t
 import numpy as np
 import pytest
 
-from detp_bake import denoise, texels as texels_mod, validity
-from detp_bake.bake import BakeSettings, compute
+from detp_bake.lightmap import denoise, texels as texels_mod, validity
+from detp_bake.run.bake import BakeSettings, compute
 from detp_bake.rays import RayCaster
 from detp_bake.scene import SunLight
 from synthetic import box, grid, joined, make_scene, sealed_room

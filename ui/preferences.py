@@ -50,7 +50,7 @@ class DETPBAKE_OT_test_cluster(bpy.types.Operator):
     bl_label = "Test Connection"
 
     def execute(self, context):
-        from ..detp_bake.distributed import Cluster
+        from ..detp_bake.run.distributed import Cluster
         from ..detp_bake.errors import BakeError
         address = context.preferences.addons[DETPBakePreferences.bl_idname].preferences.scheduler_address.strip()
         if not address:

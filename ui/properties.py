@@ -6,7 +6,8 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-from ..detp_bake import bake, estimators, options
+from ..detp_bake.run import bake
+from ..detp_bake import estimators, options
 
 ESTIMATORS = [(n, estimators.get(n).label, estimators.get(n).description) for n in estimators.names()]
 _PROPERTY = {bool: BoolProperty, int: IntProperty, float: FloatProperty}

@@ -12,19 +12,19 @@ DEFAULT_UV = UV_LAYER
 DEFAULT_ALBEDO = (0.8, 0.8, 0.8)
 
 
-def _has_nodes(idblock) -> bool:
+def uses_nodes(idblock) -> bool:
     """Node-based shading in use (`use_nodes` is deprecated in Blender 5, where it always is)."""
     if idblock.node_tree is None:
         return False
     return bpy.app.version >= (5, 0, 0) or bool(idblock.use_nodes)
 
 
-def _rgb(sock) -> np.ndarray:
+def socket_rgb(sock) -> np.ndarray:
     v = sock.default_value
     return np.array([v[0], v[1], v[2]], float) if hasattr(v, "__len__") else np.full(3, float(v))
 
 
-def _value(sock, default=0.0) -> float:
+def socket_value(sock, default=0.0) -> float:
     return float(sock.default_value) if sock is not None else default
 
 

@@ -355,11 +355,9 @@ class Collector:
         return self
 
 
-def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = True):
-    """World-space arrays, one BakeObject per owner (an object, or all instances of one instancer),
-    the export statistics, and the scene's textures and per-triangle texture and opacity arrays
-    (materials.TextureTable.finish). Raises BakeError past `max_bytes` before building anything big, and
-    for a bake target without faces (`strict`; otherwise it is just not baked)."""
+def _largest(c: "Collector", max_bytes: Optional[int]) -> list:
+    """The five sources of the most flattened triangles (for report.json); BakeError when the whole
+    scene would flatten to more than `max_bytes`, naming them."""
     counts: dict = {}
     for owner, key, *_, source in c.records:
         entry = counts.setdefault(source, [0, 0])
@@ -373,6 +371,15 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = T
                          f" ({d['triangles']:,} triangles)" for d in top)
         raise BakeError(f"the scene's geometry flattens to {total:,} triangles, {total * _BYTES_PER_TRIANGLE / 1e9:.2f} "
                         f"GB, more than the budget of {max_bytes / 1e9:.2f} GB; the biggest: {said}")
+    return top
+
+
+def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = True):
+    """World-space arrays, one BakeObject per owner (an object, or all instances of one instancer),
+    the export statistics, and the scene's textures and per-triangle texture and opacity arrays
+    (materials.TextureTable.finish). Raises BakeError past `max_bytes` before building anything big, and
+    for a bake target without faces (`strict`; otherwise it is just not baked)."""
+    top = _largest(c, max_bytes)
     groups: dict = {}
     for rec in c.records:
         groups.setdefault((rec[0], rec[4]), []).append(rec)

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import BakeError
 from ..scene import Scene
-from .common import DEFAULT_UV, _has_nodes
+from .common import DEFAULT_UV, uses_nodes
 from .evaluation import Collector, flatten, holdout, instancers, render_evaluation, rendered_names
 from .materials import Surface, read_surface
 from .world import export_world
@@ -18,7 +18,7 @@ from .uv import ensure_lightmap_uv
 
 def material_surface(mat) -> Surface:
     """The lightmap view of a material (materials.read_surface)."""
-    return read_surface(mat, _has_nodes(mat) if mat is not None else False)
+    return read_surface(mat, uses_nodes(mat) if mat is not None else False)
 
 
 def material_albedo_emission(mat) -> tuple[np.ndarray, np.ndarray]:
@@ -46,20 +46,9 @@ def scene_bounces(bl_scene) -> int:
     return int(min(cycles.diffuse_bounces, cycles.max_bounces))
 
 
-def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = None,
-                 uv_layer=None, resolution=0, log: Callable[[str], None] = print,
-                 created: Optional[list] = None, max_bytes: Optional[int] = None) -> Scene:
-    """The scene as F12 renders it (`render_evaluation`): every rendered mesh, curve, surface, text
-    and metaball, and every instance of one, is geometry in world space; `objects` (default: every
-    rendered mesh object) get lightmaps, and must be real mesh objects. `depsgraph` only names the
-    view layer (default: the context's); a render depsgraph is used as it is.
-
-    `uv_layer` names the lightmap UV layer: one name for all, or {object name: layer} for some; a
-    named layer must exist. Objects with no name given use DEFAULT_UV, created by Lightmap Pack
-    where missing (said through `log`, and listed in `created` as (object, layer) so a cancelled
-    bake can remove it again). `resolution` is one size for all or {object name: size}.
-    `max_bytes` limits the flattened geometry (BakeError naming the biggest contributors)."""
-    view_layer = depsgraph.view_layer if depsgraph is not None else bpy.context.view_layer
+def _targets(bl_scene, view_layer, objects, log) -> list:
+    """The objects to bake: every rendered mesh that can take a lightmap (others said through `log`)
+    when `objects` is None, else the named ones, each checked (BakeError naming the first that cannot)."""
     rendered = rendered_names(view_layer)
     if objects is None:
         targets = [o for o in bl_scene.objects if o.type == "MESH" and o.name in rendered
@@ -93,6 +82,24 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
             if why:
                 raise BakeError(f"object '{name}' cannot get a lightmap: {why}")
             targets.append(obj)
+    return targets
+
+
+def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = None,
+                 uv_layer=None, resolution=0, log: Callable[[str], None] = print,
+                 created: Optional[list] = None, max_bytes: Optional[int] = None) -> Scene:
+    """The scene as F12 renders it (`render_evaluation`): every rendered mesh, curve, surface, text
+    and metaball, and every instance of one, is geometry in world space; `objects` (default: every
+    rendered mesh object) get lightmaps, and must be real mesh objects. `depsgraph` only names the
+    view layer (default: the context's); a render depsgraph is used as it is.
+
+    `uv_layer` names the lightmap UV layer: one name for all, or {object name: layer} for some; a
+    named layer must exist. Objects with no name given use DEFAULT_UV, created by Lightmap Pack
+    where missing (said through `log`, and listed in `created` as (object, layer) so a cancelled
+    bake can remove it again). `resolution` is one size for all or {object name: size}.
+    `max_bytes` limits the flattened geometry (BakeError naming the biggest contributors)."""
+    view_layer = depsgraph.view_layer if depsgraph is not None else bpy.context.view_layer
+    targets = _targets(bl_scene, view_layer, objects, log)
     if not targets:
         raise BakeError(f"scene '{bl_scene.name}' has no rendered mesh object to bake")
     named = uv_layer if isinstance(uv_layer, dict) else {o.name: uv_layer for o in targets if uv_layer}

@@ -1,4 +1,4 @@
-"""The Blender side of a frame range (detp_bake/frames.py): the scene at a frame, exported as F12
+"""The Blender side of a frame range (detp_bake/run/frames.py): the scene at a frame, exported as F12
 renders it, and the user's current frame given back afterwards."""
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ from typing import Optional
 import bpy
 
 from ..errors import BakeError
-from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY, _has_nodes
+from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY, uses_nodes
 
 
 def load_image(path: str, name: str, sequence: bool = False):
@@ -130,7 +130,7 @@ def apply_lightmap(obj, image, uv_name: str, shared: bool = False, frames: Optio
             _use_nodes(mat)
             entry["copy"] = mat.name
             slot.material = mat
-        elif shared or shared_mesh or not _has_nodes(original):
+        elif shared or shared_mesh or not uses_nodes(original):
             mat = original.copy()
             mat.name = f"{original.name} ({obj.name} lightmap)"
             _use_nodes(mat)

@@ -17,7 +17,7 @@ from typing import Optional
 
 import numpy as np
 
-from ..textures import EXTENSIONS, INTERPOLATIONS, LINEAR, Textures, srgb_to_linear
+from ..transport.textures import EXTENSIONS, INTERPOLATIONS, LINEAR, Textures, srgb_to_linear
 
 DEFAULT_ALBEDO = (0.8, 0.8, 0.8)
 MAX_TEXTURE = 1024  # longest side of an exported image: photon bounces need no more
@@ -64,7 +64,7 @@ def _const(sock, default=0.0) -> float:
     return float(sock.default_value) if sock is not None else default
 
 
-def _linked(sock):
+def linked_socket(sock):
     """(node, output socket) feeding `sock`, through reroutes; None when unlinked."""
     while sock is not None and sock.is_linked:
         link = sock.links[0]
@@ -79,7 +79,7 @@ def _linked(sock):
 
 
 def _uv_of(tex_node, notes) -> Optional[str]:
-    src = _linked(tex_node.inputs.get("Vector"))
+    src = linked_socket(tex_node.inputs.get("Vector"))
     if src is None:
         return None
     node, out = src
@@ -91,7 +91,7 @@ def _uv_of(tex_node, notes) -> Optional[str]:
     return None
 
 
-def _image_use(node, notes, ops=(), read_uv: bool = True) -> Optional[ImageUse]:
+def image_use(node, notes, ops=(), read_uv: bool = True) -> Optional[ImageUse]:
     img = node.image
     if img is None:
         return None
@@ -113,12 +113,12 @@ _COLOUR_OPS = ("GAMMA", "INVERT", "BRIGHTCONTRAST", "HUE_SAT", "CURVE_RGB")
 
 def colour(sock, notes, ops=()) -> tuple[np.ndarray, Optional[ImageUse], Optional[str]]:
     """What a colour socket carries: (constant RGB factor, image or None, colour attribute or None)."""
-    src = _linked(sock)
+    src = linked_socket(sock)
     if src is None:
         return _rgb(sock.default_value) if sock is not None else np.ones(3), None, None
     node, out = src
     if node.type == "TEX_IMAGE":
-        use = _image_use(node, notes, ops)
+        use = image_use(node, notes, ops)
         if use is None:
             return (_rgb(sock.default_value) if hasattr(sock, "default_value") else np.ones(3)), None, None
         return np.ones(3), use, None
@@ -144,7 +144,7 @@ def _mix(node, notes):
     fac_sock = _input(node, "Factor", "Fac")
     a_sock = _input(node, "A", "Color1")
     b_sock = _input(node, "B", "Color2")
-    if _linked(fac_sock) is not None:
+    if linked_socket(fac_sock) is not None:
         notes.append(f"'{node.name}' has a linked factor: its value is used")
     f = min(max(_const(fac_sock, 0.5), 0.0), 1.0)
     ca, ia, va = colour(a_sock, notes)
@@ -252,7 +252,7 @@ def _surface_shader(mat):
     for out in outputs:
         if out.target not in ("ALL", "CYCLES"):
             continue
-        src = _linked(out.inputs.get("Surface"))
+        src = linked_socket(out.inputs.get("Surface"))
         if src is not None:
             return src[0]
     return None
@@ -285,9 +285,9 @@ def _shader(node, notes) -> Surface:
             (1.0 - _const(_input(node, "Transmission Weight", "Transmission")))
         s = Surface(albedo=base * diffuse, albedo_image=image, colour_attribute=attr, notes=notes)
         alpha = _input(node, "Alpha")
-        src = _linked(alpha)
+        src = linked_socket(alpha)
         if src is not None and src[0].type == "TEX_IMAGE" and src[1].name == "Alpha":
-            s.opacity_image = _image_use(src[0], notes)
+            s.opacity_image = image_use(src[0], notes)
         elif src is not None:
             notes.append(f"the alpha of '{node.name}' comes from a {src[0].type.lower()} node: its value is used")
             s.opacity = _const(alpha, 1.0)
@@ -314,7 +314,7 @@ def _shader(node, notes) -> Surface:
         return Surface(albedo=np.zeros(3), emission=e * _const(_input(node, "Strength"), 1.0), notes=notes)
     if t in ("MIX_SHADER", "ADD_SHADER"):
         shaders = [s for s in node.inputs if s.type == "SHADER"]
-        parts = [_linked(s) for s in shaders]
+        parts = [linked_socket(s) for s in shaders]
         subs = [(_shader(p[0], notes) if p is not None else Surface(albedo=np.zeros(3))) for p in parts]
         if t == "ADD_SHADER":
             a, b = subs
@@ -325,10 +325,10 @@ def _shader(node, notes) -> Surface:
             return out
         fac_sock = _input(node, "Fac")
         a, b = subs
-        src = _linked(fac_sock)
+        src = linked_socket(fac_sock)
         transparent = [p is not None and p[0].type == "BSDF_TRANSPARENT" for p in parts]
         if src is not None and src[0].type == "TEX_IMAGE" and src[1].name == "Alpha" and transparent[0]:
-            b.opacity_image = _image_use(src[0], notes)  # the classic leaf: Transparent ↔ BSDF by alpha
+            b.opacity_image = image_use(src[0], notes)  # the classic leaf: Transparent ↔ BSDF by alpha
             return b
         if src is not None:
             notes.append(f"'{node.name}' has a linked factor: its value is used")

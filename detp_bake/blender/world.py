@@ -6,9 +6,9 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..environment import EnvironmentMap
-from .common import _has_nodes, _rgb, _value
-from .materials import _image_use, _linked, image_pixels
+from ..transport.environment import EnvironmentMap
+from .common import uses_nodes, socket_rgb, socket_value
+from .materials import image_use, linked_socket, image_pixels
 
 
 def _euler_matrix(rx: float, ry: float, rz: float) -> np.ndarray:
@@ -22,7 +22,7 @@ def _euler_matrix(rx: float, ry: float, rz: float) -> np.ndarray:
 
 def _rotation(env_node, log) -> np.ndarray:
     """The rotation R with which the texture reads direction ω at R·ω (Mapping node, if any)."""
-    src = _linked(env_node.inputs.get("Vector"))
+    src = linked_socket(env_node.inputs.get("Vector"))
     if src is None:
         return np.eye(3)
     node, _ = src
@@ -33,7 +33,7 @@ def _rotation(env_node, log) -> np.ndarray:
         return np.eye(3)
     rot = node.inputs.get("Rotation")
     r = _euler_matrix(*rot.default_value) if rot is not None and not rot.is_linked else np.eye(3)
-    inner = _linked(node.inputs.get("Vector"))
+    inner = linked_socket(node.inputs.get("Vector"))
     if inner is not None and inner[0].type != "TEX_COORD":
         log(f"world: the Mapping node reads a {inner[0].type.lower()} node: taken as the view direction")
     return r.T if node.vector_type == "TEXTURE" else r
@@ -43,25 +43,25 @@ def export_world(world, log: Callable[[str], None] = print) -> tuple[np.ndarray,
     """(constant sky radiance, environment map or None) of the scene's world."""
     if world is None:
         return np.zeros(3), None
-    if not _has_nodes(world):
+    if not uses_nodes(world):
         return np.array(world.color[:3], float), None
     for node in world.node_tree.nodes:
         if node.type != "OUTPUT_WORLD" or not node.is_active_output:
             continue
-        src = _linked(node.inputs.get("Surface"))
+        src = linked_socket(node.inputs.get("Surface"))
         if src is None or src[0].type != "BACKGROUND":
             if src is not None:
                 log(f"world: a {src[0].type.lower()} shader is not understood: no world light")
             return np.zeros(3), None
         bg = src[0]
-        strength = _value(bg.inputs.get("Strength"), 1.0)
-        colour = _linked(bg.inputs["Color"])
+        strength = socket_value(bg.inputs.get("Strength"), 1.0)
+        colour = linked_socket(bg.inputs["Color"])
         if colour is None:
-            return _rgb(bg.inputs["Color"]) * strength, None
+            return socket_rgb(bg.inputs["Color"]) * strength, None
         tex, out = colour
         if tex.type == "TEX_ENVIRONMENT" and out.name == "Color" and tex.image is not None:
             notes = []
-            use = _image_use(tex, notes, read_uv=False)
+            use = image_use(tex, notes, read_uv=False)
             for note in notes:
                 log(f"world: {note}")
             if use is not None:
@@ -70,5 +70,5 @@ def export_world(world, log: Callable[[str], None] = print) -> tuple[np.ndarray,
                 radiance = image_pixels(use)[..., :3] * strength
                 return np.zeros(3), EnvironmentMap(np.ascontiguousarray(radiance, np.float32), _rotation(tex, log))
         log(f"world: its colour comes from a {tex.type.lower()} node: the socket's value is used")
-        return _rgb(bg.inputs["Color"]) * strength, None
+        return socket_rgb(bg.inputs["Color"]) * strength, None
     return np.zeros(3), None

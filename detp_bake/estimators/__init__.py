@@ -19,8 +19,8 @@ import numpy as np
 
 from ..errors import BakeError
 from ..options import KERNELS, RADIUS_TEXELS_ALL, RADIUS_TEXELS_INDIRECT, default  # noqa: F401 (re-exported)
-from ..photons import PhotonBatch
-from ..texels import TexelSet
+from ..transport.photons import PhotonBatch
+from ..lightmap.texels import TexelSet
 
 
 @dataclass

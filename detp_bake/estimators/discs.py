@@ -22,7 +22,7 @@ import numba
 import numpy as np
 
 from ..errors import BakeError
-from ..texels import TexelSet
+from ..lightmap.texels import TexelSet
 
 SLAB = 0.25  # δ as a fraction of r, at most
 FLAT_SLAB = 0.02  # δ over the texel's own surface rise, as a fraction of r

@@ -29,7 +29,7 @@ from .discs import Discs, make_discs
 from ..morton import morton_order
 from .sphere_cache import STREAM_SEGMENTS, SphereCache
 from ..errors import BakeError
-from ..texels import select
+from ..lightmap.texels import select
 
 MOVING = {"sphere_cache": SphereCache, "disc_index": DiscIndex}
 BOX_DISCS = 4096  # discs per box of the segment filter, at most

@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..rays import RayCaster
-from ..validity import LIFT
+from ..lightmap.validity import LIFT
 from . import Estimate, Estimator, register
 from ..bvh import discs_meet_triangles
 

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from ..texels import TexelSet
+from ..lightmap.texels import TexelSet
 
 SMALL_PIECE = 64  # vertices: a piece this small is measured from its vertices when texels are too few
 

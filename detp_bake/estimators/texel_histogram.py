@@ -22,8 +22,8 @@ import time
 import numba
 import numpy as np
 
-from ..textures import hit_uv, opacity_at, surfaces
-from ..validity import Cuts, on_side
+from ..transport.textures import hit_uv, opacity_at, surfaces
+from ..lightmap.validity import Cuts, on_side
 from . import Estimate, Estimator, register
 
 # A landing's weight cos(shading normal) / cos(face normal) is capped: on a face tilted 30° from its

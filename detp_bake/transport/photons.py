@@ -20,13 +20,13 @@ from typing import Callable, Iterator, Optional
 import numba
 import numpy as np
 
-from .errors import BakeCancelled
-from .rays import RayCaster
+from ..errors import BakeCancelled
+from ..rays import RayCaster
 from .lights import build_emitters
 from .schedule import BatchSchedule
 from .textures import surfaces
 from .scattering import MAX_PASSES, RAY_FAR, bounce, material_table, pass_through
-from .scene import Scene
+from ..scene import Scene
 
 
 @dataclass

@@ -40,8 +40,8 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .bvh import discs_meet_triangles, faces_against
-from .sampling import inline
+from ..bvh import discs_meet_triangles, faces_against
+from ..sampling import inline
 from .texels import TexelSet, geometric_normals, neighbour_pairs, pixel_steps
 
 DIRECTIONS = 8  # probe rays per texel, in opposite pairs

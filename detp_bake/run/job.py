@@ -1,10 +1,13 @@
-"""A job: one bake or one comparison, run on a worker thread and told as typed events.
+"""A job: one bake, one comparison or one frame range (FramesJob), run on a worker thread and told
+as typed events.
 
 Every front end (the Blender operators, `blender -c detp_bake`, `python -m detp_bake`) makes a Job
 from settings and an exported scene and reads its events: Started, Phase, Progress (with an
 ETA), Warning, Preview, then exactly one of Result, Error or Cancelled. The job turns the core's
 progress callback, its cancel and stop callables and its exceptions into those events, so no
-front end talks to bake.py's four channels itself.
+front end talks to bake.py's four channels itself. One exception is left: the command line's frame
+ranges call frames.bake_frames on the main thread, which exports each frame as it comes (bpy is not
+thread-safe; the panel exports every frame first and runs a FramesJob).
 
 One job runs at a time per process (a Blender session): two at once would share numba's thread
 pool, which aborts the process under the workqueue layer. `start` refuses a second one with
@@ -21,8 +24,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterator, Optional
 
-from . import bake as bake_mod, comparison, frames, images, incremental, photons
-from .errors import BakeCancelled, BakeError
+from . import bake as bake_mod, comparison, frames, incremental
+from ..lightmap import images
+from ..transport import photons
+from ..errors import BakeCancelled, BakeError
 
 # Share of the whole job each phase stands for (the progress bar and the ETA).
 PHASES = {"export": (0.0, 0.0), "direct": (0.0, 0.1), "prepare": (0.1, 0.15), "trace": (0.15, 0.9),

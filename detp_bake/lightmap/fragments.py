@@ -24,7 +24,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .charts import chart_widths
-from .bvh import discs_meet_triangles
+from ..bvh import discs_meet_triangles
 from .texels import TexelSet, geometric_normals
 
 FRAGMENT = 8.0  # texels: charts narrower than this (charts.py's width) are not denoised as an image

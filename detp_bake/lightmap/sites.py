@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
-from .options import AUTO_FROM, AUTO_SPACING
+from ..options import AUTO_FROM, AUTO_SPACING
 from .texels import TexelSet
 
 NORMAL_COS = 0.9  # corners facing further away than about 25° are another surface

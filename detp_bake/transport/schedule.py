@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import sampling
+from .. import sampling
 from .lights import Emitter, allocate
 
 

@@ -32,9 +32,10 @@ from typing import Iterable, Optional
 
 import numpy as np
 
-from . import __version__, denoise
+from .. import __version__
+from ..lightmap import denoise
 from .bake import disc_reach
-from .scene import Scene, SunLight
+from ..scene import Scene, SunLight
 
 # Estimators whose per-texel sums cannot depend on the other texels of the bake (a single-frame
 # hybrid is the disc index; see the module's doc for the sphere cache).

@@ -40,7 +40,7 @@ import numpy as np
 
 from scipy.ndimage import find_objects
 
-from .errors import BakeError
+from ..errors import BakeError
 from .texels import dilate, neighbour_pairs
 
 FILTERS = ("RT", "RTLightmap")

@@ -31,8 +31,8 @@ import zipfile
 from pathlib import Path
 from typing import Callable, Iterator, Optional
 
-from .errors import BakeCancelled, BakeError
-from .options import CONNECT_TIMEOUT  # seconds to reach the scheduler and see a worker
+from ..errors import BakeCancelled, BakeError
+from ..options import CONNECT_TIMEOUT  # seconds to reach the scheduler and see a worker
 
 UNITS_PER_SLOT = 3  # units per worker thread: small enough to balance, large enough to amortise
 MAX_UNIT_BATCHES = 16  # batches in a unit: a few seconds of one core
@@ -41,7 +41,7 @@ AHEAD_PER_SLOT = 2  # units submitted ahead of the one the client adds next, per
 RESEND = 3  # times a unit the scheduler dropped (its worker died with the bake's only copy) is sent again
 MEMORY_SHARE = 0.6  # of a worker's memory limit a unit may plan to use
 CORE = "detp_bake"  # the core's package name on the workers
-_PREFIX = __name__.rpartition(".")[0]  # the core's package name here ("detp_bake" or bl_ext.….detp_bake)
+_PREFIX = __name__.rsplit(".", 2)[0]  # the core's package name here ("detp_bake" or bl_ext.….detp_bake): run/'s parent
 
 
 class Cluster:
@@ -113,7 +113,7 @@ class Cluster:
                 "memory_limit": min((m for m in limits if m), default=0)}
 
     def _workers_lack_core(self) -> bool:
-        from . import __version__
+        from .. import __version__
         versions = self.client.run(pydoc.locate, f"{CORE}.__version__")
         return any(v != __version__ for v in versions.values())
 
@@ -333,7 +333,7 @@ def _by_name(fn):
 
 def core_zip() -> tuple[bytes, str]:
     """The core as a zip (`detp_bake/…`, without the Blender adapter), and a digest of it."""
-    root = Path(__file__).resolve().parent
+    root = Path(__file__).resolve().parents[1]  # the core: this file is run/distributed.py
     buf = io.BytesIO()
     files = sorted(p for p in root.rglob("*.py") if "__pycache__" not in p.parts and p.relative_to(root).parts[0] != "blender")
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
@@ -344,7 +344,7 @@ def core_zip() -> tuple[bytes, str]:
     return data, hashlib.sha256(data).hexdigest()[:16]
 
 
-_BOOTSTRAP = '''"""detp_bake's core, uploaded by a client (detp_bake/distributed.py): unpacked once per version."""
+_BOOTSTRAP = '''"""detp_bake's core, uploaded by a client (detp_bake/run/distributed.py): unpacked once per version."""
 import base64, io, os, sys, tempfile, uuid, zipfile
 
 _DATA = {data!r}

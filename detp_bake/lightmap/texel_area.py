@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .sampling import inline
+from ..sampling import inline
 from .texels import pixel_steps, texel_centres
 from .validity import Cuts, on_side
 

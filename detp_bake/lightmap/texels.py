@@ -17,10 +17,10 @@ import numba
 import numpy as np
 
 from . import charts as charts_mod
-from .bvh import discs_meet_triangles
-from .errors import BakeError
-from .rays import RayCaster
-from .scene import Scene
+from ..bvh import discs_meet_triangles
+from ..errors import BakeError
+from ..rays import RayCaster
+from ..scene import Scene
 
 HALF_DIAGONAL_SQ = 0.5  # (√2 / 2)², in texel units
 

@@ -17,8 +17,8 @@ import numpy as np
 
 from .footprint import sky_areas, sky_start
 from .emitter import Emitter
-from .sampling import inline, jit, photon_rng, search_cdf, uniform2
-from .texel_area import area_point
+from ..sampling import inline, jit, photon_rng, search_cdf, uniform2
+from ..lightmap.texel_area import area_point
 
 
 @dataclass

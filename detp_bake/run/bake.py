@@ -1,5 +1,5 @@
-"""The bake pipeline: scene → photons → texels → estimator → images, one entry point for every
-front end (CLI, Blender operator, tests).
+"""The bake pipeline: scene → texels → photons → estimators → images. The front ends run it
+through a job (job.py); tests and benchmarks call `compute` and `write` directly.
 
 `compute` does the long work and reports through `progress(Progress)`; it checks `cancel()` between
 photon batches and between estimator chunks, so a cancel lands within a batch's time (well under
@@ -19,18 +19,21 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from . import __version__, charts as charts_mod, denoise as denoise_mod, direct as direct_mod, estimators, \
-    fragments as fragments_mod, frame_direct, images, interrupt, memory, options, sites as sites_mod, staging, texels as texels_mod, validity
-from .errors import BakeCancelled, BakeError
-from .options import AUTO_PHOTONS, DIRECT_MODES, MAX_BOUNCES, MAX_DIRECT_SAMPLES, MAX_PHOTONS, MAX_RESOLUTION, \
-    MAX_SPACING, PHOTONS_PER_TEXEL, default  # noqa: F401 (the front ends read the limits here too)
-from .noise import MIN_GROUPS, BatchNoise
-from .estimators import EstimatorSettings
-from .estimators.discs import SLAB, capped_radius, disc_radius
-from .estimators.rise import own_surface_rise, piece_extent, welded_pieces
-from .photons import PhotonBatch, PhotonTracer, TraceStats
-from .rays import RayCaster
-from .scene import Scene
+from .. import __version__, estimators, options
+from ..lightmap import (charts as charts_mod, denoise as denoise_mod, fragments as fragments_mod, images,
+    sites as sites_mod, staging, texels as texels_mod, validity)
+from ..transport import direct as direct_mod, frame_direct
+from . import interrupt, memory
+from ..errors import BakeCancelled, BakeError
+from ..options import (AUTO_PHOTONS, DIRECT_MODES, MAX_BOUNCES, MAX_DIRECT_SAMPLES,  # noqa: F401 (re-exported)
+    MAX_PHOTONS, MAX_RESOLUTION, MAX_SPACING, PHOTONS_PER_TEXEL, default)
+from ..lightmap.noise import MIN_GROUPS, BatchNoise
+from ..estimators import EstimatorSettings
+from ..estimators.discs import SLAB, capped_radius, disc_radius
+from ..estimators.rise import own_surface_rise, piece_extent, welded_pieces
+from ..transport.photons import PhotonBatch, PhotonTracer, TraceStats
+from ..rays import RayCaster
+from ..scene import Scene
 
 # Ranges and defaults of the settings: options.py (re-exported here for the bake's own messages).
 # Automatic photon count (photons = 0): PHOTONS_PER_TEXEL for each lightmap texel to bake, within

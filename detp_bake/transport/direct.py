@@ -42,16 +42,16 @@ from typing import Callable, Optional
 import numba
 import numpy as np
 
-from .errors import BakeCancelled, BakeError
+from ..errors import BakeCancelled, BakeError
 from .lights import emissive_triangles, spot_factor
-from .sampling import (cone_lobe, cosine_hemisphere, in_frame, inline, jit, orthonormal_basis, photon_rng,
-                       search_cdf, seed_key, uniform2, uniform_disc, uniform_triangle)
+from ..sampling import (cone_lobe, cosine_hemisphere, in_frame, inline, jit, orthonormal_basis, photon_rng,
+    search_cdf, seed_key, uniform2, uniform_disc, uniform_triangle)
 from .environment import environment_rays
 from .scattering import MAX_PASSES
-from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
+from ..scene import AreaLight, PointLight, Scene, SpotLight, SunLight
 from .textures import opacity_at, surfaces
-from .texel_area import area_point, texel_squares
-from .texels import geometric_normals
+from ..lightmap.texel_area import area_point, texel_squares
+from ..lightmap.texels import geometric_normals
 
 POINT, SUN, AREA, MESH, WORLD, WORLD_MAP = 0, 1, 2, 3, 4, 5
 # Point, spot and sun lights: exact away from penumbrae (every ray agrees), even with a radius or an
@@ -443,6 +443,109 @@ def texel_ids(texels) -> np.ndarray:
     return ids
 
 
+class _DirectWork:
+    """The shadow rays of one direct_irradiance call, chunk by chunk (`chunk`, from any thread):
+    what every chunk reads (texels, lights, the scene's arrays) is set up once here."""
+
+    def __init__(self, scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel):
+        self.caster, self.lights, self.samples, self.seed, self.spread = caster, lights, samples, seed, spread
+        self.out, self.sharp, self.progress, self.cancel = out, sharp, progress, cancel
+        n = len(texels)
+        self.pos = np.ascontiguousarray(texels.position, np.float64)
+        self.nrm = np.ascontiguousarray(texels.normal, np.float64)
+        self.geo = geometric_normals(scene, texels.triangle, self.nrm)
+        self.ids = texel_ids(texels)
+        self.squares = texel_squares(texels)
+        self.uvs = np.ascontiguousarray(scene.uvs, np.float32)
+        self.positions = np.ascontiguousarray(scene.positions, np.float32)
+        self.eps = scene.ray_offset()
+        self.srf = surfaces(scene)
+        # Lights with extent share one budget per texel, by what each would give it unshadowed.
+        shared = [i for i, l in enumerate(lights) if l.kind in (POINT, SUN, AREA) and not l.extra and l.samples > 1] \
+            if select else []
+        self.shared = shared if len(shared) >= 2 else []
+        self.kinds = np.array([lights[i].kind for i in self.shared], np.int64)
+        self.params = np.array([lights[i].params for i in self.shared], np.float64) if self.shared \
+            else np.zeros((0, 32))
+        self.chunks = [(a, min(n, a + CHUNK)) for a in range(0, n, CHUNK)]
+        self.rays = [0] * len(self.chunks)
+        self.done = 0
+        self.lock = threading.Lock()
+
+    def chunk(self, index) -> None:
+        if self.cancel is not None and self.cancel():
+            raise BakeCancelled()
+        a, b = self.chunks[index]
+        lights, shared, sharp = self.lights, self.shared, self.sharp
+        most = (b - a) * max(max(l.samples, l.extra) for l in lights) * (len(shared) if shared else 1)
+        buffers = (np.empty((most, 3), np.float32), np.empty((most, 3), np.float32), np.empty(most, np.float32),
+                   np.empty((most, 3)), np.empty(most, np.int64))
+        acc = np.zeros((b - a, 3))
+        sharp_acc = np.zeros((b - a, 3)) if sharp is not None else None
+        shares = None
+        if shared:
+            shares = np.empty((b - a, len(shared)), np.int64)
+            light_shares(self.kinds, self.params, self.samples, a, b, self.pos, self.nrm, shares)
+        for li, light in enumerate(lights):
+            key = seed_key(self.seed * 7919 + 1000003 * (li + 1))
+            own = np.zeros((b - a, 3))
+            counts = shares[:, shared.index(li)].copy() if li in shared else _NONE
+            disagree = self.cast(index, buffers, light, key, 0, light.samples, _NONE, own, counts)
+            if light.extra:
+                # A shadow edge, a spot's rim or the light's horizon crosses the texel's middle.
+                mixed = np.flatnonzero(disagree)
+                if mixed.size:
+                    more = np.zeros((b - a, 3))
+                    self.cast(index, buffers, light, key, light.samples, light.extra, (mixed + a).astype(np.int64),
+                              more)
+                    n0, n1 = light.samples, light.extra
+                    own[mixed] = (n0 * own[mixed] + n1 * more[mixed]) / (n0 + n1)
+            acc += own
+            if sharp is not None and light.kind in SHARP_KINDS:
+                sharp_acc += own
+        self.out[a:b] = acc
+        if sharp is not None:
+            sharp[a:b] = sharp_acc
+        with self.lock:
+            self.done += 1
+            fraction = self.done / len(self.chunks)
+        if self.progress is not None:
+            self.progress(fraction)
+
+    def cast(self, index, buffers, light, key, j0, count, sel, into, counts=None):
+        """Rays of `light` (samples j0 … j0 + count − 1) for chunk `index` into `into`; for a light
+        with a top-up, which texels of the chunk its rays disagree on, else None."""
+        a, b = self.chunks[index]
+        o, d, t, w, owner = buffers
+        counts = _NONE if counts is None else counts
+        mesh = light.kind == MESH
+        if light.kind == WORLD_MAP:
+            k = environment_rays(*light.env, light.samples, key, self.ids, a, b, self.pos, self.nrm, self.geo, self.eps,
+                                 self.spread, *self.squares, self.uvs, self.positions, o, d, t, w, owner)
+        else:
+            k = _shadow_rays(light.kind, light.params, j0, count, light.samples + light.extra, sel, counts, key,
+                             self.ids, a, b, self.pos, self.nrm, self.geo, self.eps,
+                             light.tri_cdf if mesh else _EMPTY_CDF, light.tri_pos if mesh else _EMPTY_TRI,
+                             light.tri_normal if mesh else _EMPTY_VEC, light.tri_radiance if mesh else _EMPTY_VEC,
+                             self.spread, *self.squares, self.uvs, self.positions, o, d, t, w, owner)
+        if k == 0:
+            return np.zeros(b - a, bool) if light.extra else None
+        if self.srf.cutout:
+            passed = transmittance(self.caster, self.srf, o[:k], d[:k], t[:k], self.eps)
+            _gather_weighted(k, passed, w, owner, a, into)
+            arrived = passed
+        else:
+            occluded = self.caster.occluded(o[:k], d[:k], t[:k])
+            _gather(k, occluded, w, owner, a, into)
+            arrived = occluded < 0
+        self.rays[index] += k
+        return _disagree(w[:k].sum(axis=1) * arrived, owner[:k] - a, b - a, count) if light.extra else None
+
+
+_NONE = np.zeros(0, np.int64)  # no texels selected, no per-texel counts
+_EMPTY_CDF, _EMPTY_TRI, _EMPTY_VEC = np.zeros(1), np.zeros((1, 3, 3)), np.zeros((1, 3))
+
+
 def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPLES, seed: int = 0,
                       threads: int = 1, progress: Optional[Callable[[float], None]] = None,
                       cancel: Optional[Callable[[], bool]] = None, spread: bool = True,
@@ -465,107 +568,14 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     out = np.zeros((n, 3), np.float32)
     if n == 0 or not lights:
         return out, {"lights": len(lights), "rays": 0, "seconds": 0.0}
-    pos = np.ascontiguousarray(texels.position, np.float64)
-    nrm = np.ascontiguousarray(texels.normal, np.float64)
-    geo = geometric_normals(scene, texels.triangle, nrm)
-    ids = texel_ids(texels)
-    squares = texel_squares(texels)
-    uvs = np.ascontiguousarray(scene.uvs, np.float32)
-    positions = np.ascontiguousarray(scene.positions, np.float32)
-    eps = scene.ray_offset()
-    srf = surfaces(scene)
-    empty_cdf = np.zeros(1)
-    empty_tri = np.zeros((1, 3, 3))
-    empty_vec = np.zeros((1, 3))
-    no_texels = np.zeros(0, np.int64)
-    no_counts = np.zeros(0, np.int64)
-    # Lights with extent share one budget per texel, by what each would give it unshadowed.
-    shared = [i for i, l in enumerate(lights) if l.kind in (POINT, SUN, AREA) and not l.extra and l.samples > 1] \
-        if select else []
-    if len(shared) < 2:
-        shared = []
-    kinds = np.array([lights[i].kind for i in shared], np.int64)
-    params = np.array([lights[i].params for i in shared], np.float64) if shared else np.zeros((0, 32))
-    chunks = [(a, min(n, a + CHUNK)) for a in range(0, n, CHUNK)]
-    rays = [0] * len(chunks)
-    done = [0]
-    lock = threading.Lock()
-
-    def run(index):
-        if cancel is not None and cancel():
-            raise BakeCancelled()
-        a, b = chunks[index]
-        most = (b - a) * max(max(l.samples, l.extra) for l in lights) * (len(shared) if shared else 1)
-        o = np.empty((most, 3), np.float32)
-        d = np.empty((most, 3), np.float32)
-        t = np.empty(most, np.float32)
-        w = np.empty((most, 3))
-        owner = np.empty(most, np.int64)
-        acc = np.zeros((b - a, 3))
-        sharp_acc = np.zeros((b - a, 3)) if sharp is not None else None
-
-        def cast(light, key, j0, count, sel, into, counts=no_counts):
-            """Rays of `light` (samples j0 … j0 + count − 1) into `into`; for a light with a top-up,
-            which texels of the chunk its rays disagree on, else None."""
-            mesh = light.kind == MESH
-            if light.kind == WORLD_MAP:
-                k = environment_rays(*light.env, light.samples, key, ids, a, b, pos, nrm, geo, eps, spread, *squares,
-                                     uvs, positions, o, d, t, w, owner)
-            else:
-                k = _shadow_rays(light.kind, light.params, j0, count, light.samples + light.extra, sel, counts, key,
-                                 ids, a, b, pos, nrm, geo, eps, light.tri_cdf if mesh else empty_cdf,
-                                 light.tri_pos if mesh else empty_tri, light.tri_normal if mesh else empty_vec,
-                                 light.tri_radiance if mesh else empty_vec, spread, *squares, uvs, positions,
-                                 o, d, t, w, owner)
-            if k == 0:
-                return np.zeros(b - a, bool) if light.extra else None
-            if srf.cutout:
-                passed = transmittance(caster, srf, o[:k], d[:k], t[:k], eps)
-                _gather_weighted(k, passed, w, owner, a, into)
-                arrived = passed
-            else:
-                occluded = caster.occluded(o[:k], d[:k], t[:k])
-                _gather(k, occluded, w, owner, a, into)
-                arrived = occluded < 0
-            rays[index] += k
-            return _disagree(w[:k].sum(axis=1) * arrived, owner[:k] - a, b - a, count) if light.extra else None
-
-        shares = None
-        if shared:
-            shares = np.empty((b - a, len(shared)), np.int64)
-            light_shares(kinds, params, samples, a, b, pos, nrm, shares)
-        for li, light in enumerate(lights):
-            key = seed_key(seed * 7919 + 1000003 * (li + 1))
-            own = np.zeros((b - a, 3))
-            counts = shares[:, shared.index(li)].copy() if li in shared else no_counts
-            disagree = cast(light, key, 0, light.samples, no_texels, own, counts)
-            if light.extra:
-                # A shadow edge, a spot's rim or the light's horizon crosses the texel's middle.
-                mixed = np.flatnonzero(disagree)
-                if mixed.size:
-                    more = np.zeros((b - a, 3))
-                    cast(light, key, light.samples, light.extra, (mixed + a).astype(np.int64), more)
-                    n0, n1 = light.samples, light.extra
-                    own[mixed] = (n0 * own[mixed] + n1 * more[mixed]) / (n0 + n1)
-            acc += own
-            if sharp is not None and light.kind in SHARP_KINDS:
-                sharp_acc += own
-        out[a:b] = acc
-        if sharp is not None:
-            sharp[a:b] = sharp_acc
-        with lock:
-            done[0] += 1
-            fraction = done[0] / len(chunks)
-        if progress is not None:
-            progress(fraction)
-
-    if threads > 1 and len(chunks) > 1:
+    work = _DirectWork(scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel)
+    if threads > 1 and len(work.chunks) > 1:
         with ThreadPoolExecutor(threads) as pool:
-            for f in [pool.submit(run, i) for i in range(len(chunks))]:
+            for f in [pool.submit(work.chunk, i) for i in range(len(work.chunks))]:
                 f.result()
     else:
-        for i in range(len(chunks)):
-            run(i)
+        for i in range(len(work.chunks)):
+            work.chunk(i)
     cuts = getattr(texels, "cuts", None)
     if cuts is not None and cuts.covered is not None:
         # Against another face's front (a box's bottom on the floor): a ray leaving such a point
@@ -573,5 +583,6 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
         out[cuts.covered] = 0.0
         if sharp is not None:
             sharp[cuts.covered] = 0.0
+    rays, shared = work.rays, work.shared
     return out, {"lights": len(lights), "samples": int(samples), "rays": int(sum(rays)), "shared": len(shared),
                  "seconds": time.perf_counter() - t0}

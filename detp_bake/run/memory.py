@@ -19,7 +19,7 @@ except ImportError:  # Windows
     resource = None
 from dataclasses import dataclass
 
-from .photons import PhotonTracer
+from ..transport.photons import PhotonTracer
 
 SEGMENT_BYTES = 40  # origin, direction, length, flux (float32)
 HIT_BYTES = 52  # position, direction, flux, normal (float32), triangle

@@ -15,14 +15,13 @@ from typing import Callable
 
 import numpy as np
 
-from .sampling import (cone_lobe, cosine_hemisphere, cosine_lobe, in_frame, inline, jit, orthonormal_basis,
-                       search_cdf,
-                       photon_rng, uniform2, uniform_disc, uniform_sphere, uniform_triangle)
+from ..sampling import (cone_lobe, cosine_hemisphere, cosine_lobe, in_frame, inline, jit, orthonormal_basis,
+    search_cdf, photon_rng, uniform2, uniform_disc, uniform_sphere, uniform_triangle)
 from .emitter import Emitter
 from .environment import environment_emitter
-from .errors import BakeError
+from ..errors import BakeError
 from .footprint import Footprint, emit_sky, emit_sun, mean_sky_area
-from .scene import AreaLight, PointLight, Scene, SpotLight, SunLight
+from ..scene import AreaLight, PointLight, Scene, SpotLight, SunLight
 
 @inline
 def spot_factor(c, cos_half, smooth):

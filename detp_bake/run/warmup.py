@@ -16,8 +16,8 @@ from typing import Optional
 
 import numpy as np
 
-from .errors import BakeCancelled
-from .scene import AreaLight, BakeObject, PointLight, Scene, SpotLight, SunLight
+from ..errors import BakeCancelled
+from ..scene import AreaLight, BakeObject, PointLight, Scene, SpotLight, SunLight
 
 _thread: Optional[threading.Thread] = None
 _cancel = threading.Event()
@@ -64,7 +64,8 @@ def _box() -> Scene:
 def warm_up(threads: int = 0, cancel=None) -> float:
     """Bake the tiny box with every estimator, both ways of finding direct light; returns seconds.
     The caller holds the job lock (or knows nothing else runs numba)."""
-    from . import bake, estimators
+    from . import bake
+    from .. import estimators
     t0 = time.perf_counter()
     for direct in bake.DIRECT_MODES:
         settings = bake.BakeSettings(photons=4000, resolution=8, direct=direct, direct_samples=2, denoise=False,

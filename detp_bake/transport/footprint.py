@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .sampling import (cone_lobe, in_frame, inline, jit, orthonormal_basis, photon_rng, uniform2, uniform_disc,
-                       uniform_sphere)
+from ..sampling import (cone_lobe, in_frame, inline, jit, orthonormal_basis, photon_rng, uniform2,
+    uniform_disc, uniform_sphere)
 
 GRID = 256  # cells along each side of the footprint's bounding rectangle
 

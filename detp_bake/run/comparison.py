@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import images
+from ..lightmap import images
 
 HEADER = 22  # pixels of label strip above each row
 

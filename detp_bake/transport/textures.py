@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import inline, jit
+from ..sampling import inline, jit
 
 REPEAT, EXTEND, CLIP = 0, 1, 2
 CLOSEST, LINEAR = 0, 1

@@ -23,9 +23,9 @@ import numba
 import numpy as np
 
 from . import direct as direct_mod
-from .scene import AreaLight, PointLight, SpotLight, SunLight
-from .texel_area import spread_reach
-from .texels import select
+from ..scene import AreaLight, PointLight, SpotLight, SunLight
+from ..lightmap.texel_area import spread_reach
+from ..lightmap.texels import select
 
 
 @dataclass

@@ -28,11 +28,13 @@ from typing import Callable, Iterable, Optional
 
 import numpy as np
 
-from . import __version__, bake as bake_mod, images
+from .. import __version__
+from . import bake as bake_mod
+from ..lightmap import images
 from .incremental import digest as _digest, lights_signature, object_signatures  # noqa: F401  (frames' keys)
-from .errors import BakeCancelled, BakeError
-from .estimators import FrameState
-from .scene import Scene
+from ..errors import BakeCancelled, BakeError
+from ..estimators import FrameState
+from ..scene import Scene
 
 MAX_FRAMES = 100_000
 SCENE_CACHE_BYTES = 256e6  # evaluated scenes kept from the motion pass for the bake pass
@@ -161,29 +163,13 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
     out = images.check_writable_dir(out_dir)
     report = progress or (lambda p: None)
     cancelled = bake_mod._cancel_fn(cancel)
-    numbers = frames.frames()
+    numbers, t_start = frames.frames(), time.perf_counter()
     n = len(numbers)
-    t_start = time.perf_counter()
     if settings.target_noise or settings.time_limit:
         log("frames may stop at different photon counts (--target-noise/--time-limit): static regions then "
             "differ between frames")
     # 1. Evaluate every frame: what moves.
-    signatures, lights, kept, export_seconds, boxes = [], [], {}, {}, []
-    held = 0
-    for k, frame in enumerate(numbers):
-        if cancelled():
-            raise BakeCancelled()
-        report(bake_mod.Progress("evaluate", k / n, f"{_frame_label(k, n, frame)} · Evaluating"))
-        t0 = time.perf_counter()
-        scene = scene_at(frame)
-        export_seconds[frame] = time.perf_counter() - t0
-        signatures.append(object_signatures(scene))
-        boxes.append(object_boxes(scene))
-        lights.append(lights_signature(scene) + f":{scene.default_bounces}")
-        size = scene.positions.nbytes * 3
-        if held + size <= SCENE_CACHE_BYTES:
-            kept[frame] = scene
-            held += size
+    signatures, lights, kept, export_seconds, boxes = _evaluate(scene_at, numbers, report, cancelled)
     motion = find_motion(signatures, lights, moving, static)
     log(motion.describe())
     evaluate_seconds = time.perf_counter() - t_start
@@ -210,9 +196,7 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
             if old is not None and old.get("inputs") == inputs and all(
                     os.path.isfile(f) for o in old["objects"] for f in o["files"]):
                 report(bake_mod.Progress("trace", 1.0, f"{label} · unchanged since the last bake: kept"))
-                result.sections.append({**old, "kept": True})
-                result.frames.append(frame)
-                result.files[frame] = {o["name"]: o["files"] for o in old["objects"]}
+                _add(result, frame, {**old, "kept": True}, {o["name"]: o["files"] for o in old["objects"]})
                 skipped.append(frame)
                 _write_report(result, frames, settings_report, evaluate_seconds, time.perf_counter() - t_start)
                 continue
@@ -232,10 +216,7 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
             section = baked.report()
             section.pop("version")
             settings_report = section.pop("settings")
-            section = {"frame": frame, "inputs": inputs, "kept": False, **section}
-            result.sections.append(section)
-            result.frames.append(frame)
-            result.files[frame] = baked.files
+            _add(result, frame, {"frame": frame, "inputs": inputs, "kept": False, **section}, baked.files)
             _write_report(result, frames, settings_report, evaluate_seconds, time.perf_counter() - t_start)
             report(bake_mod.Progress("frame", 1.0, f"{label} · written"))
             del baked, scene
@@ -248,6 +229,34 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
             f"({_ranges(skipped)}); --force bakes them again")
     result.skipped = skipped
     return result
+
+
+def _evaluate(scene_at, numbers, report, cancelled):
+    """Every frame evaluated once: (its objects' signatures, its lights' signature, the scenes kept
+    for the bake (up to SCENE_CACHE_BYTES), the seconds each export took, its objects' boxes)."""
+    signatures, lights, kept, export_seconds, boxes = [], [], {}, {}, []
+    held, n = 0, len(numbers)
+    for k, frame in enumerate(numbers):
+        if cancelled():
+            raise BakeCancelled()
+        report(bake_mod.Progress("evaluate", k / n, f"{_frame_label(k, n, frame)} · Evaluating"))
+        t0 = time.perf_counter()
+        scene = scene_at(frame)
+        export_seconds[frame] = time.perf_counter() - t0
+        signatures.append(object_signatures(scene))
+        boxes.append(object_boxes(scene))
+        lights.append(lights_signature(scene) + f":{scene.default_bounces}")
+        size = scene.positions.nbytes * 3
+        if held + size <= SCENE_CACHE_BYTES:
+            kept[frame] = scene
+            held += size
+    return signatures, lights, kept, export_seconds, boxes
+
+
+def _add(result: "FramesResult", frame: int, section: dict, files: dict) -> None:
+    result.sections.append(section)
+    result.frames.append(frame)
+    result.files[frame] = files
 
 
 def _previous(path: Path) -> tuple[dict, Optional[dict]]:

@@ -16,9 +16,12 @@ from pathlib import Path
 from dataclasses import replace
 from typing import Optional, Sequence
 
-from . import __version__, bake as bake_mod, images, interrupt, job as job_mod, options, output
-from .errors import BakeCancelled, BakeError
-from .estimators import compare_defaults
+from .. import __version__, options
+from ..run import bake as bake_mod, interrupt, job as job_mod
+from ..lightmap import images
+from . import output
+from ..errors import BakeCancelled, BakeError
+from ..estimators import compare_defaults
 
 
 def build_parser(prog: str = "python -m detp_bake", with_scene_path: bool = True) -> argparse.ArgumentParser:
@@ -115,7 +118,7 @@ def _open_scene(args, settings, bl_scene, warn=output.log):
     """Check the inputs, open the .blend (unless Blender has one open) and export it."""
     blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene, warn)
     t0 = time.perf_counter()
-    from .memory import geometry_budget
+    from ..run.memory import geometry_budget
     created = []
     scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
                                  created, max_bytes=geometry_budget(settings.memory_budget_mb) or None)
@@ -148,7 +151,7 @@ def _check_and_open(args, settings, bl_scene, warn=output.log):
         warn("--apply without --save: the lightmaps are wired into the materials in memory only, and "
              "nothing lasting happens (add --save OUT.blend)")
     try:
-        from . import blender
+        from .. import blender
     except ImportError as exc:
         if exc.name != "bpy":
             raise
@@ -269,7 +272,7 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
 
 def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> dict:
     """--frames: every frame of the range (frames.py); a cancel keeps the frames finished."""
-    from . import frames
+    from ..run import frames
     if args.frames is None:
         raise BakeError("--moving and --static need --frames")
     frame_range = frames.parse_frames(args.frames)
@@ -278,7 +281,7 @@ def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> d
     if getattr(args, "cluster", None) is not None:
         raise BakeError("--frames bakes here: --scheduler and --workers do not take frame ranges yet")
     blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene, warn)
-    from .memory import geometry_budget
+    from ..run.memory import geometry_budget
     created = []
     scene_at = blender.frame_exporter(bl_scene, args.objects, args.uv_layer, settings.resolution, _log, created,
                                       max_bytes=geometry_budget(settings.memory_budget_mb) or None)
@@ -319,7 +322,7 @@ def _cluster(args):
     if args.workers < 0:
         raise BakeError(f"setting 'workers' = {args.workers}: must be 1 or more")
     settings_from_args(args).validate()
-    from .distributed import Cluster
+    from ..run.distributed import Cluster
     cluster = Cluster(args.scheduler, args.workers, timeout=args.connect_timeout)
     cluster.connect()
     info = cluster.describe()

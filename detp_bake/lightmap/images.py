@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import BakeError
+from ..errors import BakeError
 
 
 def _oiio():

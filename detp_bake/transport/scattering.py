@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .sampling import cosine_hemisphere, jit, uniform2
+from ..sampling import cosine_hemisphere, jit, uniform2
 from .textures import hit_uv, lookup, opacity_at
 
 RAY_FAR = 1e37  # a ray's initial tfar: no limit

@@ -1,0 +1,1 @@
+"""The lightmaps' texels: rasterised charts, validity, sites, noise, denoising and images."""

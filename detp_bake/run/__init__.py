@@ -1,0 +1,1 @@
+"""The run: the pipeline, jobs, frame ranges, reuse, memory, warm-up, clusters and comparisons."""

@@ -1,0 +1,1 @@
+"""Light transport: emission, photon tracing, scattering, textures and direct light."""

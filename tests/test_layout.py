@@ -1,0 +1,103 @@
+"""The core's shape, as docs/architecture.md draws it: folders in the data's order, imports that run
+one way, no private names borrowed across modules, and no long functions outside compiled kernels.
+Read from the source with `ast`, so it needs neither bpy nor a built kernel."""
+import ast
+from pathlib import Path
+
+import pytest
+
+CORE = Path(__file__).resolve().parents[1] / "detp_bake"
+# A folder may import its own modules and those of folders of a lower rank; blender/ (the adapter)
+# reads the core's data types and lights, and only the command line reaches into it (lazily).
+RANK = {"base": 0, "lightmap": 1, "transport": 2, "estimators": 3, "run": 4, "cli": 5}
+BLENDER_MAY = {"base", "lightmap", "transport"}
+LONGEST = 80  # lines a function may have, compiled kernels aside
+
+
+def _modules():
+    for path in sorted(CORE.rglob("*.py")):
+        if "__pycache__" in path.parts or path.name == "__main__.py":
+            continue
+        parts = list(path.relative_to(CORE.parent).with_suffix("").parts)
+        package = parts[-1] == "__init__"
+        yield ".".join(parts[:-1] if package else parts), package, path
+
+
+def _folder(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and (CORE / parts[1]).is_dir() else "base"
+
+
+def _top_level_imports(module, package, tree):
+    """(target module, imported names, node) of each import that runs when the module loads:
+    the module's body, not functions, not `if TYPE_CHECKING:` blocks."""
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and node.level:
+            base = module.split(".") if package else module.split(".")[:-1]
+            if node.level > 1:
+                base = base[:len(base) - node.level + 1]
+            target = ".".join(base + ([node.module] if node.module else []))
+            yield target, [a.name for a in node.names], node
+
+
+def _graph():
+    graph, modules = {}, {m: (p, path) for m, p, path in _modules()}
+    for module, (package, path) in modules.items():
+        edges = set()
+        for target, names, _ in _top_level_imports(module, package, ast.parse(path.read_text())):
+            subs = [f"{target}.{n}" for n in names if f"{target}.{n}" in modules]
+            edges.update(subs or ([target] if target in modules else []))
+        graph[module] = edges - {module}
+    return graph
+
+
+def test_no_module_imports_itself_back_when_it_loads():
+    graph = _graph()
+    seen, stack, cycles = {}, [], []
+
+    def visit(m):
+        seen[m] = "open"
+        stack.append(m)
+        for t in sorted(graph[m]):
+            if seen.get(t) == "open":
+                cycles.append(stack[stack.index(t):] + [t])
+            elif t not in seen:
+                visit(t)
+        stack.pop()
+        seen[m] = "done"
+    for m in sorted(graph):
+        if m not in seen:
+            visit(m)
+    assert not cycles, cycles
+
+
+def test_folders_import_in_the_datas_order():
+    wrong = []
+    for module, targets in _graph().items():
+        here = _folder(module)
+        for target in targets:
+            there = _folder(target)
+            if here == there or target == "detp_bake":
+                continue
+            ok = there in BLENDER_MAY if here == "blender" else \
+                there != "blender" and RANK[there] <= RANK[here]
+            if not ok:
+                wrong.append(f"{module} ({here}) imports {target} ({there})")
+    assert not wrong, "\n".join(wrong)
+
+
+@pytest.mark.parametrize("check", ["private names", "long functions"])
+def test_modules_keep_their_own_secrets_and_functions_short(check):
+    found = []
+    for module, package, path in _modules():
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if check == "private names" and isinstance(node, ast.ImportFrom) and node.level:
+                found += [f"{module}: {a.name}" for a in node.names if a.name.startswith("_") and
+                          not a.name.startswith("__")]
+            elif check == "long functions" and isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                compiled = any("jit" in ast.unparse(d) or "inline" in ast.unparse(d) for d in node.decorator_list)
+                length = node.end_lineno - node.lineno + 1
+                if length > LONGEST and not compiled:
+                    found.append(f"{module}.{node.name}: {length} lines")
+    assert not found, found
