@@ -172,3 +172,35 @@ def test_unchanged_frames_are_kept_and_force_bakes_them_again(tmp_path):
         assert p.read_bytes() == before[p][0] and p.stat().st_ino != before[p][1]
     other_seed = frames.bake_frames(scene, frames.parse_frames("1-2"), _settings(seed=4), tmp_path)
     assert other_seed.skipped == []
+
+
+def test_a_range_as_a_job_has_one_progress_bar_whose_exports_run_on_the_callers_thread(tmp_path):
+    """FramesJob (what the panel and the command line run): the overall progress only grows over
+    the whole range (it does not restart each frame) and ends at 1; each frame's scene is made on
+    the thread that serves the job's MainThread (bpy is not thread-safe), not on the worker."""
+    import threading
+    import time
+    from detp_bake.run import job as job_mod
+
+    main, made_on = job_mod.MainThread(), []
+
+    def export(frame):
+        made_on.append(threading.current_thread())
+        return scene_at(frame - 1)
+
+    job = job_mod.FramesJob(lambda f: main.call(export, f), frames.parse_frames("1-3"), _settings(), tmp_path)
+    job.start()
+    events = []
+    while not job.done:
+        main.serve()
+        events += job.poll()
+        time.sleep(0.01)
+    events += job.poll()
+    progress = [e for e in events if isinstance(e, job_mod.Progress)]
+    assert isinstance(events[-1], job_mod.Result) and events[-1].frames.frames == [1, 2, 3]
+    # Frame k of 3 moves the bar within its third of the range, and the last ends it.
+    for e in progress:
+        k = int(e.message.split("/")[0].split()[-1]) - 1
+        assert e.phase == "evaluate" and e.overall == 0.0 or k / 3 - 1e-9 <= e.overall <= (k + 1) / 3 + 1e-9, e
+    assert progress[-1].overall == pytest.approx(1.0) and progress[-1].message.endswith("written")
+    assert made_on and all(t is threading.current_thread() for t in made_on)

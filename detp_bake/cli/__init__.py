@@ -167,10 +167,11 @@ def _check_cancel(cancel) -> None:
         raise BakeCancelled()
 
 
-def _run_job(job: job_mod.Job, cancel=None, said=()) -> job_mod.Result:
+def _run_job(job: job_mod.Job, cancel=None, said=(), main: Optional[job_mod.MainThread] = None) -> job_mod.Result:
     """Run a job to its end, its progress and warnings on stderr as the worker sends them (but the
     warnings in `said`, which the command line has said already, and nothing once cancelled);
-    `cancel()` true (a signal, interrupt.py) cancels it."""
+    `cancel()` true (a signal, interrupt.py) cancels it. `main`: calls the worker makes on this
+    thread (a frame's export), run here between polls."""
     progress = StderrProgress()
     said = set(said)
 
@@ -186,6 +187,8 @@ def _run_job(job: job_mod.Job, cancel=None, said=()) -> job_mod.Result:
     job.start()
     try:
         while True:
+            if main is not None:
+                main.serve()
             for event in job.poll():
                 if isinstance(event, job_mod.Error):
                     raise BakeError(event.message)
@@ -198,6 +201,8 @@ def _run_job(job: job_mod.Job, cancel=None, said=()) -> job_mod.Result:
             time.sleep(0.05)
     except KeyboardInterrupt:
         job.cancel()
+        if main is not None:
+            main.close()  # a worker waiting for a frame's export is let go
         job.thread.join()
         raise BakeCancelled() from None
 
@@ -285,12 +290,16 @@ def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> d
     created = []
     scene_at = blender.frame_exporter(bl_scene, args.objects, args.uv_layer, settings.resolution, _log, created,
                                       max_bytes=geometry_budget(settings.memory_budget_mb) or None)
-    with blender.frame_kept(bl_scene):
-        result = frames.bake_frames(scene_at, frame_range, settings, out_dir, StderrProgress(), cancel,
-                                    moving=args.moving, static=args.static, log=_log, force=args.force)
-    _warn_created(args, created, warn)
-    if not result.frames:
-        raise BakeCancelled()
+    # The same job engine as every bake (one at a time, events, one progress bar over the range);
+    # each frame is exported here, on the main thread, when the worker asks for it.
+    main = job_mod.MainThread()
+    job = job_mod.FramesJob(lambda frame: main.call(scene_at, frame), frame_range, settings, out_dir,
+                            moving=args.moving, static=args.static, force=args.force, log=_log)
+    try:
+        with blender.frame_kept(bl_scene):
+            result = _run_job(job, cancel, warn, main).frames
+    finally:
+        _warn_created(args, created, warn)
     # The finished frames are in place: from here on a signal no longer undoes them.
     first = result.frames[0]
     last = max(f for i, f in enumerate(result.frames) if f == first + i)  # a cancel keeps a shorter sequence

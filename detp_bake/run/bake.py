@@ -124,10 +124,12 @@ class BakeSettings:
 
 @dataclass
 class Progress:
-    """A typed progress event: `phase` is trace, estimate or write; `fraction` of that phase."""
+    """A typed progress event: `phase` is trace, estimate or write; `fraction` of that phase;
+    `part` (k, n) when the phase belongs to the k-th of n parts of one job (a range's frames)."""
     phase: str
     fraction: float
     message: str
+    part: Optional[tuple] = None
 
 
 @dataclass

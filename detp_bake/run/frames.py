@@ -195,14 +195,14 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
             old = previous.get(frame)
             if old is not None and old.get("inputs") == inputs and all(
                     os.path.isfile(f) for o in old["objects"] for f in o["files"]):
-                report(bake_mod.Progress("trace", 1.0, f"{label} · unchanged since the last bake: kept"))
+                report(bake_mod.Progress("write", 1.0, f"{label} · unchanged since the last bake: kept", part=(k, n)))
                 _add(result, frame, {**old, "kept": True}, {o["name"]: o["files"] for o in old["objects"]})
                 skipped.append(frame)
                 _write_report(result, frames, settings_report, evaluate_seconds, time.perf_counter() - t_start)
                 continue
 
-            def framed(p, label=label):
-                report(bake_mod.Progress(p.phase, p.fraction, f"{label} · {p.message}"))
+            def framed(p, label=label, k=k):
+                report(bake_mod.Progress(p.phase, p.fraction, f"{label} · {p.message}", part=(k, n)))
 
             t0 = time.perf_counter()
             scene = kept.pop(frame, None)
@@ -218,7 +218,7 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
             settings_report = section.pop("settings")
             _add(result, frame, {"frame": frame, "inputs": inputs, "kept": False, **section}, baked.files)
             _write_report(result, frames, settings_report, evaluate_seconds, time.perf_counter() - t_start)
-            report(bake_mod.Progress("frame", 1.0, f"{label} · written"))
+            report(bake_mod.Progress("write", 1.0, f"{label} · written", part=(k, n)))
             del baked, scene
     except BakeCancelled:
         result.cancelled = True

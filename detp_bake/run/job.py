@@ -5,9 +5,9 @@ Every front end (the Blender operators, `blender -c detp_bake`, `python -m detp_
 from settings and an exported scene and reads its events: Started, Phase, Progress (with an
 ETA), Warning, Preview, then exactly one of Result, Error or Cancelled. The job turns the core's
 progress callback, its cancel and stop callables and its exceptions into those events, so no
-front end talks to bake.py's four channels itself. One exception is left: the command line's frame
-ranges call frames.bake_frames on the main thread, which exports each frame as it comes (bpy is not
-thread-safe; the panel exports every frame first and runs a FramesJob).
+front end talks to bake.py's four channels itself. A frame range's progress (`Progress.part`) runs
+once over the whole range. The command line exports each frame when the worker asks for it, on its
+own thread (`MainThread`: bpy is not thread-safe); the panel exports every frame first.
 
 One job runs at a time per process (a Blender session): two at once would share numba's thread
 pool, which aborts the process under the workqueue layer. `start` refuses a second one with
@@ -271,6 +271,9 @@ class Job:
             self._send(Phase(p.phase))
         lo, hi = PHASES.get(p.phase, (0.0, 0.0))
         overall = lo + (hi - lo) * min(1.0, max(0.0, p.fraction))
+        if p.part is not None:  # a frame of a range: one bar and one ETA over the whole range
+            k, n = p.part
+            overall = (k + overall) / max(n, 1)
         self.last = Progress(p.phase, p.fraction, p.message, overall, self._clock.eta(overall))
         self._send(self.last)
 
@@ -361,19 +364,65 @@ class FramesJob(Job):
     notes (which objects move, frames kept) are in `notes`."""
 
     def __init__(self, scene_at, frame_range, settings: bake_mod.BakeSettings, out_dir, *, moving=(), static=(),
-                 force: bool = False, warnings=(), export_seconds: float = 0.0):
+                 force: bool = False, warnings=(), export_seconds: float = 0.0, log=None):
         super().__init__(None, settings, out_dir, warnings=warnings, export_seconds=export_seconds)
         self.kind = "frames"
         self.scene_at, self.frame_range = scene_at, frame_range
         self.moving, self.static, self.force = list(moving), list(static), force
         self.notes: list = []
+        self.log = log  # also told each note as it comes (the command line's stderr), when given
+
+    def _note(self, message: str) -> None:
+        self.notes.append(message)
+        if self.log is not None:
+            self.log(message)
 
     def _compute(self) -> Result:
         done = frames.bake_frames(self.scene_at, self.frame_range, self.settings, self.out_dir, self._progress,
-                                  self._cancel, self.moving, self.static, self.notes.append, self.force)
+                                  self._cancel, self.moving, self.static, self._note, self.force)
         if not done.frames:
             raise BakeCancelled()
         return Result({}, self.out_dir, done.report_path, frames=done)
+
+
+class MainThread:
+    """Calls a job's worker must make on the front end's thread (bpy is not thread-safe: a frame
+    range's export, frame by frame): the worker's `call(fn, *args)` waits until the front end's
+    loop runs `serve()`, and returns what fn returned or raises what it raised."""
+
+    def __init__(self):
+        self._calls: queue.Queue = queue.Queue()
+        self.closed = False
+
+    def call(self, fn, *args):
+        if self.closed:
+            raise BakeCancelled()
+        box, done = {}, threading.Event()
+        self._calls.put((fn, args, box, done))
+        done.wait()
+        if "error" in box:
+            raise box["error"]
+        return box["value"]
+
+    def serve(self) -> None:
+        """Run the calls waiting (on the front end's thread)."""
+        while True:
+            try:
+                fn, args, box, done = self._calls.get_nowait()
+            except queue.Empty:
+                return
+            try:
+                if self.closed:
+                    raise BakeCancelled()
+                box["value"] = fn(*args)
+            except BaseException as exc:  # the worker raises it, as if it had called fn itself
+                box["error"] = exc
+            done.set()
+
+    def close(self) -> None:
+        """No more calls: the waiting ones and any later one raise BakeCancelled in the worker."""
+        self.closed = True
+        self.serve()
 
 
 def release_memory() -> None:
