@@ -67,8 +67,11 @@ class BlenderJob:
             raise
         self.export_seconds = time.perf_counter() - t0
         cluster = common.cluster(context)  # the preferences' Dask scheduler: connected by the job's worker
+        # A bake keeps the lightmaps of objects unchanged since the last bake into the same folder
+        # (incremental.py), as the command line does, unless Rebake All says otherwise.
         self.job = job_mod.Job(scene, self.settings, self.out_dir, self.names, export_seconds=self.export_seconds,
-                               preview=self.preview_interval,
+                               preview=self.preview_interval, reuse=self.names is None,
+                               force=bool(self.bl_scene.detp_bake.rebake_all),
                                cluster=None if isinstance(cluster, contextlib.AbstractContextManager)
                                and not hasattr(cluster, "client") else cluster)
         if self.preview_interval > 0:
@@ -149,22 +152,31 @@ class BakeJob(BlenderJob):
         """Apply the result (main thread) or undo the export's changes; returns operator status."""
         if not self.succeeded(report):
             return self.failed(report)
-        r = self.outcome.results[self.settings.estimator]
+        r = self.outcome.results.get(self.settings.estimator)  # None: every lightmap was reused
+        reused = dict(self.outcome.reused)
+        files = {**reused, **(r.files if r is not None else {})}
         scene = self.bl_scene
         s = scene.detp_bake
-        if s.apply_after_bake and "exr" in r.settings.formats:
+        if s.apply_after_bake and "exr" in self.settings.formats:
             uv = common.uv_layers([scene.objects[n] for n in self.objects if n in scene.objects])
-            blender.apply_all(scene, r.files, uv, r.settings.estimator)
+            blender.apply_all(scene, files, uv, self.settings.estimator)
+        kept = (f"; {len(reused)} unchanged since the last bake, kept (Rebake All bakes them again)"
+                if reused else "")
+        for warning in self.warnings:
+            report({"WARNING"}, warning)
+        if r is None:
+            s.last_report = json.dumps({"estimator": self.settings.estimator, "objects": len(files), "files": files,
+                                        "reused": sorted(reused), "output_directory": self.out_dir})
+            report({"INFO"}, f"All {len(files)} lightmaps unchanged since the last bake into {self.out_dir}: kept")
+            return {"FINISHED"}
         summary = r.report()
         s.last_report = json.dumps({"estimator": r.settings.estimator, "photons": summary["photons"],
-                                    "segments": summary["segments"], "objects": len(r.files),
-                                    "seconds": summary["seconds"], "files": r.files,
+                                    "segments": summary["segments"], "objects": len(files),
+                                    "seconds": summary["seconds"], "files": files, "reused": sorted(reused),
                                     "noise": summary["noise"], "stopped_by": summary["stopped_by"],
                                     "charts": {o["name"]: o["charts"] for o in summary["objects"] if "charts" in o},
                                     "output_directory": self.out_dir})
         total = sum(v for k, v in r.seconds.items() if k != "rasterise")
-        for warning in self.warnings:
-            report({"WARNING"}, warning)
         report({"INFO"}, f"Baked {len(r.files)} lightmaps with {r.settings.estimator} in {total:.1f} s "
-                         f"({summary['photons']:,} photons) to {self.out_dir}")
+                         f"({summary['photons']:,} photons) to {self.out_dir}{kept}")
         return {"FINISHED"}

@@ -414,3 +414,26 @@ def test_the_panel_and_the_command_line_build_the_same_settings(addon, cornell, 
     assert {o.name for o in options.OPTIONS if not hasattr(s, o.name)} == {"memory_budget_mb"}
     for name in choices:  # reset for the next case
         s.property_unset(name)
+
+
+def test_a_second_panel_bake_keeps_unchanged_lightmaps_and_rebake_all_bakes_them(addon, cornell, bpy, tmp_path):
+    """The panel reuses lightmaps as the command line does (incremental.py): a second bake into the
+    same folder with nothing changed writes nothing (the files keep their inodes) and applies the
+    files it kept; Rebake All bakes every object again."""
+    _small(cornell, tmp_path)
+    assert bpy.ops.detp_bake.bake() == {"FINISHED"}
+    first = {p.name: p.stat().st_ino for p in tmp_path.glob("*.exr")}
+    assert bpy.ops.detp_bake.revert() == {"FINISHED"}
+    assert bpy.ops.detp_bake.bake() == {"FINISHED"}
+    assert {p.name: p.stat().st_ino for p in tmp_path.glob("*.exr")} == first
+    report = json.loads(cornell.detp_bake.last_report)
+    assert len(report["reused"]) == 7 and "photons" not in report
+    assert "detp_bake lightmap" in cornell.objects["Floor"].material_slots[0].material.node_tree.nodes
+    panels = sys.modules[f"{PACKAGE}.ui.panels"]
+    log = []
+    panels.DETPBAKE_PT_stats.draw(type("P", (), {"layout": RecordingLayout(bpy, log)})(), bpy.context)
+    cornell.detp_bake.rebake_all = True
+    assert bpy.ops.detp_bake.bake() == {"FINISHED"}
+    again = {p.name: p.stat().st_ino for p in tmp_path.glob("*.exr")}
+    assert set(again) == set(first) and all(again[n] != first[n] for n in first)
+    assert json.loads(cornell.detp_bake.last_report)["photons"] == 20_000

@@ -134,6 +134,7 @@ class DETPBAKE_PT_lightmaps(_Panel, bpy.types.Panel):
         layout.prop(s, "output_directory")
         layout.prop(s, "formats")
         layout.prop(s, "apply_after_bake")
+        layout.prop(s, "rebake_all")
         row = layout.row(align=True)
         row.operator("detp_bake.unwrap", text="Unwrap: Lightmap Pack").method = "LIGHTMAP_PACK"
         row.operator("detp_bake.unwrap", text="xatlas").method = "XATLAS"
@@ -194,7 +195,10 @@ class DETPBAKE_PT_stats(_Panel, bpy.types.Panel):
         r = json.loads(text)
         col = layout.column(align=True)
         col.label(text=f"{r['estimator']}: {r['objects']} lightmaps")
-        col.label(text=f"{r['photons']:,} photons, {r['segments']:,} segments")
+        if r.get("reused"):
+            col.label(text=f"{len(r['reused'])} unchanged since the last bake: kept")
+        if "photons" in r:
+            col.label(text=f"{r['photons']:,} photons, {r['segments']:,} segments")
         if r.get("noise"):
             worst = max(r["noise"], key=r["noise"].get)
             col.label(text=f"Noise: {r['noise'][worst]:.2g} % at most ({worst})")
@@ -205,7 +209,7 @@ class DETPBAKE_PT_stats(_Panel, bpy.types.Panel):
         if r.get("stopped_by", "photons") != "photons":
             col.label(text=f"Stopped by {r['stopped_by'].replace('_', ' ')}")
         for phase in ("export", "validity", "direct", "build", "trace", "estimate", "denoise", "write"):
-            if phase in r["seconds"]:
+            if phase in r.get("seconds", {}):
                 col.label(text=f"{phase.capitalize()}: {r['seconds'][phase]:.2f} s")
 
 

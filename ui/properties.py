@@ -71,6 +71,9 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
     live_preview_interval: FloatProperty(name="Preview Every", default=1.0, min=0.1, soft_max=10.0,
                                          subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE",
                                          description="Seconds between live preview updates")
+    rebake_all: BoolProperty(name="Rebake All", default=False,
+                             description="Bake every object again, also those whose lightmaps in the output folder "
+                                         "are unchanged since the last bake (the command line's --force)")
     apply_after_bake: BoolProperty(name="Apply After Bake", default=True,
                                    description="Show the lightmaps on the objects' materials when the bake ends")
     threads: IntProperty(name="Threads", default=options.default("threads"), min=0, max=1024,
