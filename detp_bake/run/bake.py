@@ -9,21 +9,19 @@ exist, so an interrupted bake never leaves half a set of lightmaps.
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import replace
 from functools import partial
-from pathlib import Path
 from typing import Callable, Optional
 
 import numpy as np
 
-from .. import __version__, estimators, options
+from .. import estimators, options
 from ..lightmap import (charts as charts_mod, denoise as denoise_mod, fragments as fragments_mod, images,
-    sites as sites_mod, staging, texels as texels_mod, validity)
+    sites as sites_mod, texels as texels_mod, validity)
 from ..transport import direct as direct_mod, frame_direct
-from . import interrupt, memory
+from . import memory
 from ..errors import BakeCancelled, BakeError
 from ..options import (AUTO_PHOTONS, DIRECT_MODES, MAX_BOUNCES, MAX_DIRECT_SAMPLES,  # noqa: F401 (re-exported)
     MAX_PHOTONS, MAX_RESOLUTION, MAX_SPACING, PHOTONS_PER_TEXEL, default)
@@ -31,206 +29,24 @@ from ..lightmap.noise import MIN_GROUPS, BatchNoise
 from ..estimators import EstimatorSettings
 from ..estimators.discs import SLAB, capped_radius, disc_radius
 from ..estimators.rise import own_surface_rise, piece_extent, welded_pieces
-from ..transport.photons import PhotonBatch, PhotonTracer, TraceStats
+from ..transport.photons import PhotonTracer
 from ..rays import RayCaster
 from ..scene import Scene
+from .batches import BLOCKS, Partial, Totals, TraceJob, blocks, trace_batches, worker_bytes  # noqa: F401 (the API)
+from .results import BakeResult, Progress, Snapshot, cancel_fn, preview_images, si  # noqa: F401 (the API)
+from .settings import BakeSettings  # noqa: F401 (the API)
+from .writing import output_paths, warn_stale, write, write_many  # noqa: F401 (the API)
 
 # Ranges and defaults of the settings: options.py (re-exported here for the bake's own messages).
 # Automatic photon count (photons = 0): PHOTONS_PER_TEXEL for each lightmap texel to bake, within
 # AUTO_PHOTONS. At 16 a texel the default (histogram + OIDN) bake of a fully covered lightmap
 # lands about 4-8 indirect photons a texel; tracing costs about 0.4 s a million photons on 2 cores.
 RAYS_PER_SECOND = 2.0e6  # photon segments traced a second and thread, for the time a bake announces
-BLOCKS = 32  # the most blocks of batches a bake is traced in (_blocks)
 # From this many pixels a lightmap's soft direct light (area lights, emissive meshes, the sky) and its
 # indirect light are denoised together: one OIDN run instead of two, where OIDN costs more than the
 # photons (docs/real_levels.md). At 64² on the project's scenes together was 0.2-0.5 points of RMSE
 # worse on the L-room and the Cornell box, 0.2-0.7 better on the window room and the courtyard.
 ONE_PASS_FROM = 1024 * 1024
-
-
-@dataclass
-class BakeSettings:
-    """Everything one bake needs to know. The settings a person chooses take their defaults, ranges
-    and help from options.py; build them from what a front end holds with `from_choices`."""
-    # texel_histogram: with shadow rays for direct light and OIDN, the best lightmap per second on
-    # every scene measured (README, benchmarks/quality.py); disc_index: the best without a denoiser.
-    estimator: str = default("estimator")
-    photons: int = default("photons")  # 0: automatic, from the texels to bake (auto_photons)
-    # sampled: direct light by shadow rays at every texel, the estimator sees indirect light only;
-    # photons: the estimator sees every segment (the paper's experiments).
-    direct: str = default("direct")
-    direct_samples: int = default("direct_samples")  # shadow rays per texel and light with extent
-    bounces: Optional[int] = default("bounces")  # None: the scene's own Cycles diffuse bounces
-    seed: int = default("seed")
-    resolution: int = default("resolution")  # default per-object lightmap size (objects may override)
-    margin: int = default("margin")  # dilation, pixels
-    formats: tuple = ("exr",)
-    half: bool = False
-    threads: int = default("threads")  # 0: all cores
-    batch_size: int = 100_000
-    memory_budget_mb: int = default("memory_budget_mb")  # 0: 80 % of the free memory (check_memory)
-    # Stop tracing early (photons is then the most to trace): once every lightmap's relative noise
-    # is at most target_noise per cent, or before time_limit seconds of tracing and estimating.
-    target_noise: float = default("target_noise")
-    time_limit: float = default("time_limit")
-    denoise: bool = default("denoise")  # OIDN on every lightmap (chart-aware; denoise.py), when pyoidn is installed
-    keep_raw: bool = False  # also write the lightmaps as they were before denoising (<name>.<estimator>.raw.exr)
-    # Texels between the sites where the estimator runs (sites.py), with sampled direct light: 0 is
-    # automatic (2 on lightmaps of 256² and more, 1 below); the paper's mode and frame ranges always
-    # estimate every texel. The texels between sites blend their neighbouring sites.
-    indirect_spacing: int = default("indirect_spacing")
-    estimator_settings: EstimatorSettings = field(default_factory=EstimatorSettings)
-
-    @classmethod
-    def from_choices(cls, choices: dict, **rest) -> "BakeSettings":
-        """Settings from what a front end holds: `choices` maps option names (options.py) to the
-        values the person chose, automatic ones as their `auto` value; `rest` sets other fields
-        (formats, half, keep_raw). Options left out keep their defaults. With automatic photons and
-        a noise target or a time limit, the photons are the most there may be."""
-        core = {name: options.BY_NAME[name].core(value) for name, value in choices.items()}
-        unknown = sorted(set(core) - set(options.BY_NAME))
-        if unknown:
-            raise BakeError(f"unknown setting(s): {', '.join(unknown)}")
-        es = {n: v for n, v in core.items() if options.BY_NAME[n].estimator}
-        bs = {n: v for n, v in core.items() if not options.BY_NAME[n].estimator}
-        if bs.get("photons", cls.photons) == 0 and (bs.get("target_noise") or bs.get("time_limit")):
-            bs["photons"] = MAX_PHOTONS
-        return cls(**bs, **rest, estimator_settings=EstimatorSettings(**es))
-
-    def validate(self) -> None:
-        """Raise BakeError naming the first setting that cannot work."""
-        def bad(setting, value, why):
-            raise BakeError(f"setting '{setting}' = {value!r}: {why}")
-        for opt in options.OPTIONS:
-            value = getattr(self.estimator_settings if opt.estimator else self, opt.name)
-            if isinstance(value, np.integer):
-                value = int(value)
-            why = opt.check(value)
-            if why:
-                bad(opt.name, value, why)
-        unknown = [f for f in self.formats if f not in images.WRITERS]
-        if unknown or not self.formats:
-            bad("formats", self.formats, f"choose from {', '.join(images.WRITERS)}")
-        if self.indirect_spacing > 1 and self.direct != "sampled":
-            bad("indirect_spacing", self.indirect_spacing, "needs direct='sampled': with direct='photons' the estimator "
-                "sees direct light too, whose shadow edges blending between sites would blur")
-        if self.batch_size < 1:
-            bad("batch_size", self.batch_size, "must be positive")
-        fixed = estimators.get(self.estimator).fixed_noise(self.estimator_settings)
-        if self.target_noise and fixed is not None:
-            bad("target_noise", self.target_noise, f"the {self.estimator} estimator's noise does not fall with "
-                f"more photons (about {100 * fixed:.2g} % whatever the count): use a DETP estimator")
-
-
-@dataclass
-class Progress:
-    """A typed progress event: `phase` is trace, estimate or write; `fraction` of that phase;
-    `part` (k, n) when the phase belongs to the k-th of n parts of one job (a range's frames)."""
-    phase: str
-    fraction: float
-    message: str
-    part: Optional[tuple] = None
-
-
-@dataclass
-class BakeResult:
-    settings: BakeSettings
-    bounces: int
-    images: dict  # object name -> (H, W, 3) float32 E/π, denoised (if asked) and dilated, row 0 at the bottom
-    masks: dict  # object name -> (H, W) bool, texels covered by the object's UVs
-    # object name -> (H, W) bool, texels baked at their centre as Cycles bakes them: the centre lies on
-    # a UV triangle and was not moved out from under other geometry (validity.py)
-    centre_masks: dict
-    texels: texels_mod.TexelSet
-    value: np.ndarray  # (N, 3) float32 E/π per texel, before dilation
-    stats: TraceStats
-    counters: dict
-    seconds: dict
-    files: dict = field(default_factory=dict)  # object name -> [paths]
-    direct: dict = field(default_factory=dict)  # how direct light was found (report.json)
-    noise: dict = field(default_factory=dict)  # object name -> relative noise of its lightmap
-    memory: dict = field(default_factory=dict)  # the estimate made before work, and the peak used
-    export: dict = field(default_factory=dict)  # what the exporter found (instances, triangles, textures, …)
-    raw_images: dict = field(default_factory=dict)  # object name -> image before denoising (when denoised)
-    cluster: dict = field(default_factory=dict)  # where the photons were traced when not here (distributed.py)
-    warnings: list = field(default_factory=list)
-    stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit, user (Stop and keep)
-    share: float = 1.0  # the share of the photons traced (less than 1 when stopped early)
-    # A bake into a folder with an earlier one (incremental.py): each baked object's key, the
-    # objects whose earlier lightmaps were kept (name -> that bake's report entry), and the entries
-    # of objects not in this bake whose files are still there.
-    keys: dict = field(default_factory=dict)
-    reused: dict = field(default_factory=dict)
-    earlier: list = field(default_factory=list)
-
-    def report(self) -> dict:
-        st = self.stats
-        settings = asdict(self.settings)
-        settings["formats"] = list(self.settings.formats)
-        settings["bounces"] = self.bounces
-        return {
-            "version": __version__,
-            "settings": settings,
-            "objects": [{"name": lm.name, "resolution": [lm.width, lm.height], "texels": lm.count,
-                         "texel_size": lm.texel_size, "files": self.files.get(lm.name, []),
-                         "charts": {"count": lm.charts, "median_width": round(lm.chart_width, 2),
-                                    "border": round(lm.border, 4)},
-                         **({"key": self.keys[lm.name], "reused": False} if lm.name in self.keys else {})}
-                        for lm in self.texels.lightmaps] + [{**entry, "reused": True} for entry in self.reused.values()],
-            **({"reused": list(self.reused)} if self.keys else {}),
-            **({"earlier_objects": self.earlier} if self.earlier else {}),
-            "photons": st.photons,
-            "segments": st.segments,
-            "hits": st.hits,
-            "photons_hit": st.photons_hit,  # photons that met the scene at all
-            "alpha": {"passes": st.alpha_passes, "cut": st.alpha_cut},
-            "rays": st.rays,
-            "flux": {"emitted": st.emitted.tolist(), "absorbed": st.absorbed.tolist(),
-                     "escaped": st.escaped.tolist(), "truncated": st.truncated.tolist()},
-            "estimator": {"name": self.settings.estimator, **self.counters},
-            "direct": self.direct,
-            "noise": {name: round(100.0 * v, 3) for name, v in self.noise.items()},  # per cent
-            "stopped_by": self.stopped_by,
-            "memory": self.memory,
-            "export": self.export,
-            "denoised": bool(self.raw_images),
-            **({"cluster": self.cluster} if self.cluster else {}),
-            "warnings": list(self.warnings),
-            "seconds": self.seconds,
-        }
-
-
-@dataclass
-class Snapshot:
-    """The bake so far, after a block of batches, for a live preview: `read()` returns the primary
-    estimator's current estimate of the whole bake, E/π per texel (N, 3), direct light included
-    (the batches so far over the share traced, as an early stop would keep them). Read it before
-    the next block is added, or not at all: `slow` says reading it costs a gather over every hit
-    so far (the photon map), not a copy of sums."""
-    estimator: str
-    photons: int
-    share: float
-    noise: Optional[float]  # the worst lightmap's relative noise so far, when measured
-    texels: texels_mod.TexelSet
-    read: Callable[[], np.ndarray]
-    slow: bool = False
-
-
-def preview_images(texels: texels_mod.TexelSet, value: np.ndarray, margin: int) -> dict:
-    """{object name: (H, W, 3) float32 image, dilated, row 0 at the bottom} of per-texel values."""
-    out = {}
-    for lm in texels.lightmaps:
-        img, mask = texels_mod.to_image(value[lm.texels], lm, texels.pixel[lm.texels])
-        out[lm.name] = texels_mod.dilate(img, mask, margin).astype(np.float32, copy=False)
-    return out
-
-
-def _cancel_fn(cancel) -> Callable[[], bool]:
-    if cancel is None:
-        return lambda: False
-    if hasattr(cancel, "is_set"):
-        return cancel.is_set
-    return cancel
 
 
 def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[Progress], None]] = None,
@@ -326,7 +142,7 @@ class _Pipeline:
         self.settings = settings = replace(settings, photons=auto_photons(scene, settings))
         self.scene, self.offset = scene.recentred()  # float32 rays and discs work near the origin (scene.py)
         self.report = progress or (lambda p: None)
-        self.cancelled = _cancel_fn(cancel)
+        self.cancelled = cancel_fn(cancel)
         self.cluster, self.frame_state, self.stop, self.preview = cluster, frame_state, stop, preview
         self.t_start = time.perf_counter()  # the time limit counts the whole bake
         self.bounces = scene.default_bounces if settings.bounces is None else int(settings.bounces)
@@ -343,7 +159,7 @@ class _Pipeline:
         self.threads = settings.threads or os.cpu_count() or 1
         if automatic:
             expect = settings.photons * per_photon / (RAYS_PER_SECOND * self.threads)
-            self.report(Progress("prepare", 0.0, f"Photons: {_si(settings.photons)}, chosen for the lightmaps' "
+            self.report(Progress("prepare", 0.0, f"Photons: {si(settings.photons)}, chosen for the lightmaps' "
                                                  f"texels ({PHOTONS_PER_TEXEL} a texel; set them with --photons); "
                                                  f"tracing them should take about {expect:.2g} s on {self.threads} "
                                                  "threads"))
@@ -435,23 +251,24 @@ class _Pipeline:
 
     def _partials(self, trace_progress):
         """The runs of batches traced here, or on a cluster's workers (distributed.py), in batch order."""
-        blocks = _blocks(self.tracer, self.runs, self.expected_segments)
+        runs_of_batches = blocks(self.tracer, self.runs, self.expected_segments)
         if self.cluster is None:
             settings = self.settings
 
             def over_time(batch_seconds):  # the next batch would take about as long as the last
                 return bool(settings.time_limit) and \
                     time.perf_counter() - self.t_start + batch_seconds > settings.time_limit
-            return (trace_batches(self.tracer, self.runs, block, self.cancelled, over_time) for block in blocks)
+            return (trace_batches(self.tracer, self.runs, block, self.cancelled, over_time)
+                    for block in runs_of_batches)
         job = TraceJob(self.scene, self.at, self.settings, self.names, self.bounces, self.batch_size, self.reach,
                        self.context)
-        return self.cluster.partials(job, blocks, self.cancelled, trace_progress,
-                                     _worker_bytes(self.need, self.at, self.runs, blocks))
+        return self.cluster.partials(job, runs_of_batches, self.cancelled, trace_progress,
+                                     worker_bytes(self.need, self.at, self.runs, runs_of_batches))
 
     def trace(self) -> None:
         """Trace batch by batch until the photons are spent or a stop (the user's, the time limit,
         the noise target) says enough; then the sums are the estimators'."""
-        settings, tracer, noise = self.settings, self.tracer, self.noise
+        tracer, noise = self.tracer, self.noise
         primary, total = self.names[0], tracer.photons
         direct_at = None if self.direct_e is None else self.sites.of_sites(self.direct_e)
         self.stopped_by, self.current = "photons", {}
@@ -460,7 +277,7 @@ class _Pipeline:
 
         def trace_progress(photons):
             photons = shown[0] = max(shown[0], photons)  # units may finish out of order
-            message = f"Tracing {_si(photons)}/{_si(total)} photons"
+            message = f"Tracing {si(photons)}/{si(total)} photons"
             if self.current:
                 message += f" · noise {100 * max(self.current.values(), default=0.0):.2g} %"
             self.report(Progress("trace", photons / total, message))
@@ -577,131 +394,6 @@ class _Pipeline:
         result.memory = {"estimate_mb": round(need.total / 1e6, 1),
                          "parts_mb": {k: round(v / 1e6, 1) for k, v in need.parts.items()},
                          "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": self.batch_size}
-
-
-@dataclass
-class Partial:
-    """What a run of consecutive batches adds to a bake, summed from zero: tracing counts and flux,
-    and per estimator its `take()` sums and the seconds it spent. Plain data (`plain`), so it
-    crosses to a client that imports this package under another name (Blender's bl_ext)."""
-    first: int  # first batch number
-    batches: int  # batches traced
-    stats: TraceStats
-    sums: dict  # estimator name -> Estimator.take()
-    seconds: dict  # estimator name -> seconds in add and take
-    stopped: bool = False  # `stop` said to stop the bake after this run (time limit)
-
-    def plain(self) -> dict:
-        return {**vars(self), "stats": vars(self.stats)}
-
-    @classmethod
-    def from_plain(cls, d: dict) -> "Partial":
-        return cls(**{**d, "stats": TraceStats(**d["stats"])})
-
-
-class Totals:
-    """A bake's sums, partials added in batch order: the same additions in the same order whoever
-    traced the batches, so the lightmaps are identical bit for bit."""
-
-    def __init__(self, names):
-        self.stats = TraceStats()
-        self.sums = {name: {} for name in names}
-        self.seconds = dict.fromkeys(names, 0.0)
-        self.batches = 0
-
-    def add(self, part: Partial) -> None:
-        if part.first != self.batches:
-            raise ValueError(f"batch {part.first} added after {self.batches} batches")
-        self.stats.add(part.stats)
-        for name, sums in part.sums.items():
-            total = self.sums[name]
-            for key, value in sums.items():
-                if key in total:
-                    total[key] += value
-                elif isinstance(value, np.ndarray) and value.flags.writeable and value.flags.owndata:
-                    total[key] = value  # an estimator's take() let it go: adopted, not copied
-                else:  # a copy: what came over the wire may be read-only
-                    total[key] = value.copy() if isinstance(value, (np.ndarray, list)) else value
-            self.seconds[name] += part.seconds[name]
-        self.batches += part.batches
-
-
-def trace_batches(tracer: PhotonTracer, runs: dict, indices: range, cancel=None,
-                  stop: Optional[Callable[[float], bool]] = None,
-                  on_batch: Optional[Callable[[PhotonBatch], None]] = None) -> Partial:
-    """Trace batches `indices` (consecutive batch numbers) into every estimator of `runs` and hand
-    over their sums. The local bake and a cluster's workers (distributed.py) both bake through this,
-    a block of batches at a time (`_blocks`). `stop(seconds the batch took)` ends the run early."""
-    tracer.stats = TraceStats()
-    seconds = dict.fromkeys(runs, 0.0)
-    done, stopped = 0, False
-    with contextlib.closing(tracer.batches(cancel, indices)) as batches:
-        t0 = time.perf_counter()
-        for batch in batches:
-            for name, est in runs.items():
-                t1 = time.perf_counter()
-                est.add(batch)
-                seconds[name] += time.perf_counter() - t1
-            done += 1
-            if on_batch is not None:
-                on_batch(batch)
-            if stop is not None and stop(time.perf_counter() - t0):
-                stopped = True
-                break
-            t0 = time.perf_counter()
-    sums = {}
-    for name, est in runs.items():
-        t1 = time.perf_counter()
-        sums[name] = est.take()
-        seconds[name] += time.perf_counter() - t1
-    return Partial(indices[0], done, tracer.stats, sums, seconds, stopped)
-
-
-def _blocks(tracer: PhotonTracer, runs: dict, expected_segments: int) -> list[range]:
-    """The bake's batches in blocks, each estimated from zero and read for noise once done: as
-    many segments as a streaming estimator gathers before it works through them, and at most a
-    sixteenth of the bake, but no fewer than a BLOCKS-th of it (reading the noise of a million
-    texels costs about 0.07 s a block on 2 cores: a block per batch took 12 s of a 1024² bake of
-    168 batches). Fixed by the settings and the scene alone, so a cluster sums exactly what a local
-    bake sums."""
-    count = tracer.batch_count
-    gather = max((est.group_segments for est in runs.values() if est.streaming), default=0)
-    per_batch = max(expected_segments / count, 1.0)
-    size = max(1, int(max(min(gather, expected_segments // 16), expected_segments // BLOCKS) / per_batch))
-    return [range(a, min(a + size, count)) for a in range(0, count, size)]
-
-
-def _worker_bytes(need: memory.Estimate, texels, runs, blocks) -> tuple[int, int]:
-    """(bytes a worker keeps for a bake, bytes one block's sums add), for sizing a cluster's units."""
-    fixed = need.total - need.parts.get("photon map hits", 0) - need.parts["lightmap images"] \
-        - need.parts.get("denoiser", 0)
-    per_block = sum(len(texels) * 3 * 8 for est in runs.values() if est.streaming)
-    if blocks and any(est.stores_hits for est in runs.values()):
-        per_block += need.parts.get("photon map hits", 0) // len(blocks)
-    return int(fixed), int(per_block)
-
-
-@dataclass
-class TraceJob:
-    """A bake's tracing and estimation inputs, plain data: what a cluster's worker needs to trace
-    any of the bake's batches exactly as the local bake would (distributed.py)."""
-    scene: Scene
-    texels: texels_mod.TexelSet
-    settings: BakeSettings
-    names: list
-    bounces: int
-    batch_size: int
-    margin: float  # how far past the geometry sun photons start (the discs' reach)
-    context: estimators.Context
-
-    def tracer(self, threads: int = 0) -> PhotonTracer:
-        s = self.settings
-        return PhotonTracer(self.scene, s.photons, self.bounces, s.seed, self.batch_size, threads or s.threads,
-                            indirect_only=s.direct == "sampled", margin=self.margin)
-
-    def estimators(self) -> dict:
-        return {name: estimators.create(name, self.texels, self.settings.estimator_settings, None, self.context)
-                for name in self.names}
 
 
 OVERLAP_WARNING = 0.01  # a share of texels: Smart UV Project may fold a bent quad over a texel or two
@@ -854,90 +546,6 @@ def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) ->
     return need
 
 
-def warn_stale(out_dir: Path, result, warn) -> None:
-    """One warning listing the lightmaps of the objects being baked, with this estimator, that an
-    earlier bake left in `out_dir` and this one will not replace (a PNG from an exr,png bake, a raw
-    EXR from a --keep-raw bake). They are left alone, as is every other file there."""
-    writing = {p.name for targets in output_paths(result, out_dir).values() for p in targets}
-    stale = sorted(name for stem in images.file_stems(result.images).values() for suffix in ("exr", "png", "raw.exr")
-                   for name in [f"{stem}.{result.settings.estimator}.{suffix}"]
-                   if name not in writing and (out_dir / name).is_file())
-    if stale:
-        warn(f"{len(stale)} lightmaps in {out_dir} from an older bake of the same objects are left as they "
-             f"were (not written this time): {', '.join(stale[:8])}{' …' if len(stale) > 8 else ''}")
-
-
-def output_paths(result: BakeResult, out_dir: Path, frame: Optional[int] = None) -> dict:
-    """<object>.<estimator>.<format>, or <object>.<estimator>.<frame:04d>.<format> for a frame of a
-    range (the number last, as image sequences want it)."""
-    stems = images.file_stems(result.images)
-    number = "" if frame is None else f".{frame:04d}"
-    out = {name: [out_dir / f"{stems[name]}.{result.settings.estimator}{number}.{fmt}"
-                  for fmt in result.settings.formats] for name in result.images}
-    if result.settings.keep_raw and result.raw_images:
-        for name, paths in out.items():
-            paths.append(out_dir / f"{stems[name]}.{result.settings.estimator}.raw{number}.exr")
-    return out
-
-
-def write(result: BakeResult, out_dir: str | os.PathLike,
-          progress: Optional[Callable[[Progress], None]] = None, cancel=None,
-          frame: Optional[int] = None) -> Optional[Path]:
-    """Write every lightmap and report.json; files appear together or not at all. For a `frame` of
-    a range the names carry its number and report.json is left to the range (frames.py)."""
-    return write_many({result.settings.estimator: result}, out_dir, progress, cancel, frame=frame)
-
-
-def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Callable[[Progress], None]] = None,
-               cancel=None, extra: Optional[dict] = None, summary: Optional[dict] = None,
-               frame: Optional[int] = None) -> Optional[Path]:
-    """Write the lightmaps of one or more results ({estimator: BakeResult}, as `compute_many`
-    gives), `extra` files ({file name: write(path)}) and one report.json: a single result's report,
-    or (several results, or a `summary` given) `summary` and a section per estimator. Everything is staged under hidden
-    temporary names and renamed at the end (staging.py): a cancel, a full disk or any error
-    before then leaves the folder as it was. Other files in the folder are left alone."""
-    t0 = time.perf_counter()
-    cancelled = _cancel_fn(cancel)
-    out = images.check_writable_dir(out_dir)
-    report = progress or (lambda p: None)
-    paths = {name: output_paths(r, out, frame) for name, r in results.items()}
-    count = sum(len(p) for p in paths.values())
-    done = 0
-    try:
-        with staging.FileSet(out) as files:
-            for estimator, result in results.items():
-                for name, targets in paths[estimator].items():
-                    for target in targets:
-                        fmt = target.suffix[1:]
-                        raw = f".{result.settings.estimator}.raw." in target.name
-                        picture = result.raw_images[name] if raw else result.images[name]
-                        half = result.settings.half
-                        files.stage(target.name, lambda tmp: images.write_exr(tmp, picture, half=half)
-                                    if fmt == "exr" else images.WRITERS[fmt](tmp, picture))
-                        done += 1
-                        interrupt.hold("write", cancelled)
-                        if cancelled():
-                            raise BakeCancelled()
-                    report(Progress("write", done / max(count, 1), f"Writing {name}"))
-            for estimator, result in results.items():
-                result.files = {name: [str(p) for p in targets] for name, targets in paths[estimator].items()}
-            for name, write_file in (extra or {}).items():  # these may read the results' files
-                files.stage(name, write_file)
-            seconds = time.perf_counter() - t0
-            for result in results.values():
-                result.seconds["write"] = seconds
-            if frame is None:  # a frame of a range: its report.json is the range's (frames.py)
-                content = next(iter(results.values())).report() if summary is None and len(results) == 1 else \
-                    {"version": __version__, **(summary or {}), "estimators": {n: r.report() for n, r in results.items()}}
-                files.stage_text("report.json", json.dumps(content, indent=2))
-            if cancelled():
-                raise BakeCancelled()
-            files.commit()
-    except OSError as exc:  # a full disk, a folder gone: nothing of this set is left
-        raise BakeError(f"cannot write '{exc.filename or out}': {exc.strerror or exc}") from None
-    return None if frame is not None else out / "report.json"
-
-
 def bake(scene: Scene, settings: BakeSettings, out_dir: str | os.PathLike,
          progress: Optional[Callable[[Progress], None]] = None, cancel=None,
          export_seconds: float = 0.0, cluster=None) -> BakeResult:
@@ -950,8 +558,3 @@ def bake(scene: Scene, settings: BakeSettings, out_dir: str | os.PathLike,
     return result
 
 
-def _si(n: int) -> str:
-    for div, suffix in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
-        if n >= div:
-            return f"{n / div:.3g}{suffix}"
-    return str(n)

@@ -162,7 +162,7 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
     settings.validate()
     out = images.check_writable_dir(out_dir)
     report = progress or (lambda p: None)
-    cancelled = bake_mod._cancel_fn(cancel)
+    cancelled = bake_mod.cancel_fn(cancel)
     numbers, t_start = frames.frames(), time.perf_counter()
     n = len(numbers)
     if settings.target_noise or settings.time_limit:

@@ -1,0 +1,132 @@
+"""What a bake hands back: progress events (Progress), the finished result and its report
+(BakeResult), the live preview's snapshot (Snapshot), and the small helpers every stage of the
+run shares (a cancel callable, counts in words)."""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Callable, Optional
+
+import numpy as np
+
+from .. import __version__
+from ..lightmap import texels as texels_mod
+from ..transport.photons import TraceStats
+from .settings import BakeSettings
+
+
+@dataclass
+class Progress:
+    """A typed progress event: `phase` is trace, estimate or write; `fraction` of that phase;
+    `part` (k, n) when the phase belongs to the k-th of n parts of one job (a range's frames)."""
+    phase: str
+    fraction: float
+    message: str
+    part: Optional[tuple] = None
+
+
+@dataclass
+class BakeResult:
+    settings: BakeSettings
+    bounces: int
+    images: dict  # object name -> (H, W, 3) float32 E/π, denoised (if asked) and dilated, row 0 at the bottom
+    masks: dict  # object name -> (H, W) bool, texels covered by the object's UVs
+    # object name -> (H, W) bool, texels baked at their centre as Cycles bakes them: the centre lies on
+    # a UV triangle and was not moved out from under other geometry (validity.py)
+    centre_masks: dict
+    texels: texels_mod.TexelSet
+    value: np.ndarray  # (N, 3) float32 E/π per texel, before dilation
+    stats: TraceStats
+    counters: dict
+    seconds: dict
+    files: dict = field(default_factory=dict)  # object name -> [paths]
+    direct: dict = field(default_factory=dict)  # how direct light was found (report.json)
+    noise: dict = field(default_factory=dict)  # object name -> relative noise of its lightmap
+    memory: dict = field(default_factory=dict)  # the estimate made before work, and the peak used
+    export: dict = field(default_factory=dict)  # what the exporter found (instances, triangles, textures, …)
+    raw_images: dict = field(default_factory=dict)  # object name -> image before denoising (when denoised)
+    cluster: dict = field(default_factory=dict)  # where the photons were traced when not here (distributed.py)
+    warnings: list = field(default_factory=list)
+    stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit, user (Stop and keep)
+    share: float = 1.0  # the share of the photons traced (less than 1 when stopped early)
+    # A bake into a folder with an earlier one (incremental.py): each baked object's key, the
+    # objects whose earlier lightmaps were kept (name -> that bake's report entry), and the entries
+    # of objects not in this bake whose files are still there.
+    keys: dict = field(default_factory=dict)
+    reused: dict = field(default_factory=dict)
+    earlier: list = field(default_factory=list)
+
+    def report(self) -> dict:
+        st = self.stats
+        settings = asdict(self.settings)
+        settings["formats"] = list(self.settings.formats)
+        settings["bounces"] = self.bounces
+        return {
+            "version": __version__,
+            "settings": settings,
+            "objects": [{"name": lm.name, "resolution": [lm.width, lm.height], "texels": lm.count,
+                         "texel_size": lm.texel_size, "files": self.files.get(lm.name, []),
+                         "charts": {"count": lm.charts, "median_width": round(lm.chart_width, 2),
+                                    "border": round(lm.border, 4)},
+                         **({"key": self.keys[lm.name], "reused": False} if lm.name in self.keys else {})}
+                        for lm in self.texels.lightmaps] + [{**entry, "reused": True} for entry in self.reused.values()],
+            **({"reused": list(self.reused)} if self.keys else {}),
+            **({"earlier_objects": self.earlier} if self.earlier else {}),
+            "photons": st.photons,
+            "segments": st.segments,
+            "hits": st.hits,
+            "photons_hit": st.photons_hit,  # photons that met the scene at all
+            "alpha": {"passes": st.alpha_passes, "cut": st.alpha_cut},
+            "rays": st.rays,
+            "flux": {"emitted": st.emitted.tolist(), "absorbed": st.absorbed.tolist(),
+                     "escaped": st.escaped.tolist(), "truncated": st.truncated.tolist()},
+            "estimator": {"name": self.settings.estimator, **self.counters},
+            "direct": self.direct,
+            "noise": {name: round(100.0 * v, 3) for name, v in self.noise.items()},  # per cent
+            "stopped_by": self.stopped_by,
+            "memory": self.memory,
+            "export": self.export,
+            "denoised": bool(self.raw_images),
+            **({"cluster": self.cluster} if self.cluster else {}),
+            "warnings": list(self.warnings),
+            "seconds": self.seconds,
+        }
+
+
+@dataclass
+class Snapshot:
+    """The bake so far, after a block of batches, for a live preview: `read()` returns the primary
+    estimator's current estimate of the whole bake, E/π per texel (N, 3), direct light included
+    (the batches so far over the share traced, as an early stop would keep them). Read it before
+    the next block is added, or not at all: `slow` says reading it costs a gather over every hit
+    so far (the photon map), not a copy of sums."""
+    estimator: str
+    photons: int
+    share: float
+    noise: Optional[float]  # the worst lightmap's relative noise so far, when measured
+    texels: texels_mod.TexelSet
+    read: Callable[[], np.ndarray]
+    slow: bool = False
+
+
+def preview_images(texels: texels_mod.TexelSet, value: np.ndarray, margin: int) -> dict:
+    """{object name: (H, W, 3) float32 image, dilated, row 0 at the bottom} of per-texel values."""
+    out = {}
+    for lm in texels.lightmaps:
+        img, mask = texels_mod.to_image(value[lm.texels], lm, texels.pixel[lm.texels])
+        out[lm.name] = texels_mod.dilate(img, mask, margin).astype(np.float32, copy=False)
+    return out
+
+
+def cancel_fn(cancel) -> Callable[[], bool]:
+    if cancel is None:
+        return lambda: False
+    if hasattr(cancel, "is_set"):
+        return cancel.is_set
+    return cancel
+
+
+def si(n: int) -> str:
+    for div, suffix in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
+        if n >= div:
+            return f"{n / div:.3g}{suffix}"
+    return str(n)
