@@ -61,8 +61,10 @@ class FramesBlenderJob(BakeJob):
         names = {o.name for scene in scenes.values() for o in scene.objects}
         moving = [n for n in self.moving if n in names]  # overrides on lights, empties, ... say nothing
         static = [n for n in self.static if n in names]
+        cluster = common.cluster(context)  # the preferences' Dask scheduler: connected by the job's worker
         self.job = job_mod.FramesJob(scenes.__getitem__, self.frame_range, self.settings, self.out_dir,
-                                     moving=moving, static=static, export_seconds=self.export_seconds)
+                                     moving=moving, static=static, export_seconds=self.export_seconds,
+                                     cluster=cluster if hasattr(cluster, "client") else None)
 
     def finish(self, report) -> set:
         self.messages += self.job.notes if self.job is not None else []  # which objects move, frames kept

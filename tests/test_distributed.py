@@ -278,3 +278,21 @@ def test_a_scheduler_and_workers_of_their_own_survive_a_killed_worker(tmp_path, 
             if p.poll() is None:
                 p.terminate()
                 p.wait(timeout=30)
+
+
+def test_a_frame_range_on_the_cluster_writes_what_a_range_here_writes(cluster, tmp_path):
+    """A frame range (the hybrid over the quasi-static scene of test_hybrid) with its photons traced
+    on the workers: every frame's lightmaps are the same bytes as a range baked here."""
+    from detp_bake.run import frames
+    from test_frames import _settings
+    from test_hybrid import scene_at
+    here = frames.bake_frames(lambda f: scene_at(f - 1), frames.parse_frames("1-2"), _settings(), tmp_path / "here")
+    far = frames.bake_frames(lambda f: scene_at(f - 1), frames.parse_frames("1-2"), _settings(), tmp_path / "far",
+                             cluster=cluster)
+    assert here.frames == far.frames == [1, 2]
+    for frame in (1, 2):
+        for name, paths in here.files[frame].items():
+            for mine, theirs in zip(paths, far.files[frame][name]):
+                assert open(mine, "rb").read() == open(theirs, "rb").read(), (frame, name)
+    assert all(section["cluster"]["workers"] == 2 for section in far.sections)
+    assert not any("cluster" in section for section in here.sections)

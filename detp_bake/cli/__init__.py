@@ -283,8 +283,6 @@ def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> d
     frame_range = frames.parse_frames(args.frames)
     if args.apply and frame_range.step != 1:
         raise BakeError("--apply with --frames needs every frame (a step of 1): an image sequence has no gaps")
-    if getattr(args, "cluster", None) is not None:
-        raise BakeError("--frames bakes here: --scheduler and --workers do not take frame ranges yet")
     blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene, warn)
     from ..run.memory import geometry_budget
     created = []
@@ -294,7 +292,8 @@ def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> d
     # each frame is exported here, on the main thread, when the worker asks for it.
     main = job_mod.MainThread()
     job = job_mod.FramesJob(lambda frame: main.call(scene_at, frame), frame_range, settings, out_dir,
-                            moving=args.moving, static=args.static, force=args.force, log=_log)
+                            moving=args.moving, static=args.static, force=args.force, log=_log,
+                            cluster=getattr(args, "cluster", None))
     try:
         with blender.frame_kept(bl_scene):
             result = _run_job(job, cancel, warn, main).frames

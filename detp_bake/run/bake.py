@@ -260,8 +260,12 @@ class _Pipeline:
                     time.perf_counter() - self.t_start + batch_seconds > settings.time_limit
             return (trace_batches(self.tracer, self.runs, block, self.cancelled, over_time)
                     for block in runs_of_batches)
+        # A frame range's workers keep what they build themselves (the hybrid's static index), per frame:
+        # what this process keeps between frames holds callables and would not travel.
+        context = self.context if self.context.frames is None else \
+            replace(self.context, frames=replace(self.context.frames, keep={}))
         job = TraceJob(self.scene, self.at, self.settings, self.names, self.bounces, self.batch_size, self.reach,
-                       self.context)
+                       context)
         return self.cluster.partials(job, runs_of_batches, self.cancelled, trace_progress,
                                      worker_bytes(self.need, self.at, self.runs, runs_of_batches))
 

@@ -152,17 +152,17 @@ def _frame_label(k: int, n: int, frame: int) -> str:
 def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: bake_mod.BakeSettings,
                 out_dir, progress: Optional[Callable[[bake_mod.Progress], None]] = None, cancel=None,
                 moving: Iterable[str] = (), static: Iterable[str] = (),
-                log: Callable[[str], None] = lambda message: None, force: bool = False) -> FramesResult:
+                log: Callable[[str], None] = lambda message: None, force: bool = False, cluster=None) -> FramesResult:
     """Bake every frame of `frames` into `out_dir`. `scene_at(frame)` returns the scene at a frame.
     A cancel stops between frames' batches: the finished frames stay, with their report.
 
     A frame whose inputs (its evaluation's hashes, the lights, the settings, where the movers go
     over the range) are those of the last bake into `out_dir`, and whose files are all there, is
-    not baked again but kept as it is (said, and marked in report.json); `force` bakes it anyway."""
+    not baked again but kept as it is (said, and marked in report.json); `force` bakes it anyway;
+    `cluster` (a connected distributed.Cluster): every frame's photons are traced there."""
     settings.validate()
     out = images.check_writable_dir(out_dir)
-    report = progress or (lambda p: None)
-    cancelled = bake_mod.cancel_fn(cancel)
+    report, cancelled = progress or (lambda p: None), bake_mod.cancel_fn(cancel)
     numbers, t_start = frames.frames(), time.perf_counter()
     n = len(numbers)
     if settings.target_noise or settings.time_limit:
@@ -209,7 +209,7 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
             if scene is None:
                 scene = scene_at(frame)
                 export_seconds[frame] += time.perf_counter() - t0
-            baked = bake_mod.compute(scene, settings, framed, cancel, frame_state=state)
+            baked = bake_mod.compute(scene, settings, framed, cancel, cluster, frame_state=state)
             baked.seconds["export"] = export_seconds[frame]
             baked.export = dict(getattr(scene, "export_stats", None) or {})
             bake_mod.write(baked, out, framed, cancel, frame=frame)

@@ -364,8 +364,8 @@ class FramesJob(Job):
     notes (which objects move, frames kept) are in `notes`."""
 
     def __init__(self, scene_at, frame_range, settings: bake_mod.BakeSettings, out_dir, *, moving=(), static=(),
-                 force: bool = False, warnings=(), export_seconds: float = 0.0, log=None):
-        super().__init__(None, settings, out_dir, warnings=warnings, export_seconds=export_seconds)
+                 force: bool = False, warnings=(), export_seconds: float = 0.0, log=None, cluster=None):
+        super().__init__(None, settings, out_dir, warnings=warnings, export_seconds=export_seconds, cluster=cluster)
         self.kind = "frames"
         self.scene_at, self.frame_range = scene_at, frame_range
         self.moving, self.static, self.force = list(moving), list(static), force
@@ -378,8 +378,10 @@ class FramesJob(Job):
             self.log(message)
 
     def _compute(self) -> Result:
-        done = frames.bake_frames(self.scene_at, self.frame_range, self.settings, self.out_dir, self._progress,
-                                  self._cancel, self.moving, self.static, self._note, self.force)
+        connect = self.cluster is not None and getattr(self.cluster, "client", None) is None
+        with (self.cluster if connect else contextlib.nullcontext(self.cluster)) as cluster:  # here, off the UI
+            done = frames.bake_frames(self.scene_at, self.frame_range, self.settings, self.out_dir, self._progress,
+                                      self._cancel, self.moving, self.static, self._note, self.force, cluster)
         if not done.frames:
             raise BakeCancelled()
         return Result({}, self.out_dir, done.report_path, frames=done)
