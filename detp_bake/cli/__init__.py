@@ -17,7 +17,9 @@ from dataclasses import replace
 from typing import Optional, Sequence
 
 from .. import __version__, options
-from ..run import bake as bake_mod, interrupt, job as job_mod
+from ..run import bake as bake_mod, frames, interrupt, job as job_mod
+from ..run.distributed import Cluster
+from ..run.memory import geometry_budget
 from ..lightmap import images
 from . import output
 from ..errors import BakeCancelled, BakeError
@@ -118,7 +120,6 @@ def _open_scene(args, settings, bl_scene, warn=output.log):
     """Check the inputs, open the .blend (unless Blender has one open) and export it."""
     blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene, warn)
     t0 = time.perf_counter()
-    from ..run.memory import geometry_budget
     created = []
     scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
                                  created, max_bytes=geometry_budget(settings.memory_budget_mb) or None)
@@ -277,14 +278,12 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
 
 def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> dict:
     """--frames: every frame of the range (frames.py); a cancel keeps the frames finished."""
-    from ..run import frames
     if args.frames is None:
         raise BakeError("--moving and --static need --frames")
     frame_range = frames.parse_frames(args.frames)
     if args.apply and frame_range.step != 1:
         raise BakeError("--apply with --frames needs every frame (a step of 1): an image sequence has no gaps")
     blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene, warn)
-    from ..run.memory import geometry_budget
     created = []
     scene_at = blender.frame_exporter(bl_scene, args.objects, args.uv_layer, settings.resolution, _log, created,
                                       max_bytes=geometry_budget(settings.memory_budget_mb) or None)
@@ -330,7 +329,6 @@ def _cluster(args):
     if args.workers < 0:
         raise BakeError(f"setting 'workers' = {args.workers}: must be 1 or more")
     settings_from_args(args).validate()
-    from ..run.distributed import Cluster
     cluster = Cluster(args.scheduler, args.workers, timeout=args.connect_timeout)
     cluster.connect()
     info = cluster.describe()

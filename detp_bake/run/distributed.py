@@ -1,6 +1,6 @@
 """Bakes on a Dask cluster: the photon batches traced on workers, summed here in batch order.
 
-A bake's batches fall into blocks (bake._blocks), each estimated from zero; a unit is a run of
+A bake's batches fall into blocks (batches.blocks), each estimated from zero; a unit is a run of
 blocks, and a worker returns each block's sums (bake.trace_batches, the very function the local
 bake runs). The client adds them in batch order (bake.Totals), so the lightmaps are identical bit
 for bit to a local bake with the same seed, whatever the number of workers, the order units finish
@@ -31,8 +31,10 @@ import zipfile
 from pathlib import Path
 from typing import Callable, Iterator, Optional
 
+from .. import __version__
 from ..errors import BakeCancelled, BakeError
 from ..options import CONNECT_TIMEOUT  # seconds to reach the scheduler and see a worker
+from . import bake
 
 UNITS_PER_SLOT = 3  # units per worker thread: small enough to balance, large enough to amortise
 MAX_UNIT_BATCHES = 16  # batches in a unit: a few seconds of one core
@@ -113,7 +115,6 @@ class Cluster:
                 "memory_limit": min((m for m in limits if m), default=0)}
 
     def _workers_lack_core(self) -> bool:
-        from .. import __version__
         versions = self.client.run(pydoc.locate, f"{CORE}.__version__")
         return any(v != __version__ for v in versions.values())
 
@@ -136,7 +137,6 @@ class Cluster:
                  worker_bytes: tuple[int, int]) -> Iterator:
         """Trace `blocks` (lists of batch numbers) of bake.TraceJob `job` on the workers; yield each
         block's bake.Partial in batch order. Closing the iterator cancels what is still out."""
-        from .bake import Partial
         client = self.client
         token = uuid.uuid4().hex[:12]
         units = self._units(blocks, worker_bytes, bool(job.settings.target_noise or job.settings.time_limit))
@@ -191,7 +191,7 @@ class Cluster:
                     progress(photons)
                 while nxt in done:
                     for plain in done.pop(nxt):
-                        yield Partial.from_plain(plain)
+                        yield bake.Partial.from_plain(plain)
                     nxt += 1
             self.last = {**self.describe(), "units": len(units), "blocks_per_unit": len(units[0]) if units else 0,
                          "resubmitted": resubmitted, "seconds": round(time.perf_counter() - t0, 3)}
@@ -260,7 +260,6 @@ def run_unit(key: str, payload: bytes, blocks: list, slots: dict, threads: int) 
     worker threads (`slots`, per host). Any exception comes back as RuntimeError with its message,
     naming this worker."""
     import numba
-    from . import bake
     address = ""
     try:
         from distributed import get_worker

@@ -16,8 +16,10 @@ from typing import Optional
 
 import numpy as np
 
+from .. import estimators
 from ..errors import BakeCancelled
 from ..scene import AreaLight, BakeObject, PointLight, Scene, SpotLight, SunLight
+from . import bake, job
 
 _thread: Optional[threading.Thread] = None
 _cancel = threading.Event()
@@ -64,8 +66,6 @@ def _box() -> Scene:
 def warm_up(threads: int = 0, cancel=None) -> float:
     """Bake the tiny box with every estimator, both ways of finding direct light; returns seconds.
     The caller holds the job lock (or knows nothing else runs numba)."""
-    from . import bake
-    from .. import estimators
     t0 = time.perf_counter()
     for direct in bake.DIRECT_MODES:
         settings = bake.BakeSettings(photons=4000, resolution=8, direct=direct, direct_samples=2, denoise=False,
@@ -77,7 +77,6 @@ def warm_up(threads: int = 0, cancel=None) -> float:
 def start(threads: int = 0) -> Optional[threading.Thread]:
     """Warm up on a daemon thread unless a job (or a warm-up) runs; returns the thread or None."""
     global _thread
-    from . import job
     holder = job.hold("warm-up")
     if holder is None:
         return None
