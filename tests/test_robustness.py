@@ -22,8 +22,39 @@ def _files(folder):
     return {p.name: p.read_bytes() for p in folder.iterdir()} if folder.exists() else {}
 
 
-def _start(args, tmp_path, **env):
-    environ = dict(os.environ, PYTHONPATH=str(ROOT), **env)
+# Loaded by the bake's own interpreter (site imports `sitecustomize` from PYTHONPATH): after its
+# first staged file the write phase says so and waits until the signal has cancelled the bake's
+# job, so the cancel lands while a file is being staged. The product has no hook of its own for it.
+_HOLD_IN_WRITE = """
+import sys, time
+from detp_bake.lightmap import staging
+from detp_bake.run import job
+
+_stage, _init, _jobs = staging.FileSet.stage, job.Job.__init__, []
+
+def init(self, *args, **kwargs):
+    _init(self, *args, **kwargs)
+    _jobs.append(self)
+
+def stage(self, *args, **kwargs):
+    out = _stage(self, *args, **kwargs)
+    print("detp_bake: test: holding in write", file=sys.stderr, flush=True)
+    end = time.monotonic() + 60.0
+    while not any(j.cancelling for j in _jobs) and time.monotonic() < end:
+        time.sleep(0.02)
+    return out
+
+job.Job.__init__, staging.FileSet.stage = init, stage
+"""
+
+
+def _start(args, tmp_path, hold_in_write=False, **env):
+    path = str(ROOT)
+    if hold_in_write:
+        (tmp_path / "hook").mkdir()
+        (tmp_path / "hook" / "sitecustomize.py").write_text(_HOLD_IN_WRITE)
+        path = f"{tmp_path / 'hook'}{os.pathsep}{ROOT}"
+    environ = dict(os.environ, PYTHONPATH=path, **env)
     if "NUMBA_CACHE_DIR" in environ:  # the subprocess runs elsewhere: keep the compiled cache
         environ["NUMBA_CACHE_DIR"] = os.path.abspath(environ["NUMBA_CACHE_DIR"])
     return subprocess.Popen([sys.executable, "-m", "detp_bake", *args], cwd=tmp_path, env=environ,
@@ -57,14 +88,14 @@ def _older_bake(out):
                                         (signal.SIGINT, "write")], ids=["sigint-trace", "sigterm-trace", "sigint-write"])
 def test_a_signal_cancels_cleanly_while_tracing_or_writing(tmp_path, sig, phase):
     """One line, exit code 130, nothing on stdout, the folder exactly as it was (no hidden
-    temporary file either). The write phase is reached by the test hold: the bake waits after its
-    first staged file, which the test sees on disk before it sends the signal."""
+    temporary file either). The write phase is reached by a hold the test loads into the bake
+    (_HOLD_IN_WRITE): the bake waits after its first staged file, which the test sees on disk
+    before it sends the signal, and goes on once the signal has set the cancel."""
     out = tmp_path / "out"
     before = _older_bake(out)
     photons = "100000000" if phase == "trace" else "5000"
-    env = {"DETP_BAKE_TEST_HOLD": "write"} if phase == "write" else {}
     proc = _start(["bake", str(CORNELL), "--photons", photons, "--resolution", "16", "--out", str(out)],
-                  tmp_path, **env)
+                  tmp_path, hold_in_write=phase == "write")
     seen = _wait_for(proc, "Tracing" if phase == "trace" else "holding in write")
     if phase == "write":
         assert any(".partial." in name for name in _files(out))  # a file really was being staged

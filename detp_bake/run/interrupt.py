@@ -4,15 +4,11 @@ one line and exit code 130 instead of a KeyboardInterrupt traceback, and nothing
 """
 from __future__ import annotations
 
-import os
 import signal
-import sys
 import threading
-import time
 from contextlib import contextmanager
 
 EXIT_CODE = 130  # 128 + SIGINT, what shells expect of a program stopped by Ctrl+C
-HOLD_ENV = "DETP_BAKE_TEST_HOLD"
 
 
 class SignalCancel:
@@ -46,15 +42,3 @@ def cancel_on_signals(signals=(signal.SIGINT, signal.SIGTERM)):
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
-
-
-def hold(phase: str, cancelled) -> None:
-    """For tests of the above: with DETP_BAKE_TEST_HOLD=<phase> (write), the bake says so on
-    stderr and waits here, up to a minute or until cancelled, so that a test can send its signal
-    at a known point of the bake. Does nothing otherwise."""
-    if os.environ.get(HOLD_ENV) != phase:
-        return
-    print(f"detp_bake: holding in {phase} ({HOLD_ENV})", file=sys.stderr, flush=True)
-    end = time.monotonic() + 60.0
-    while not cancelled() and time.monotonic() < end:
-        time.sleep(0.02)

@@ -12,7 +12,6 @@ from typing import Callable, Optional
 from .. import __version__
 from ..errors import BakeCancelled, BakeError
 from ..lightmap import images, staging
-from . import interrupt
 from .results import BakeResult, Progress, cancel_fn
 
 
@@ -77,7 +76,6 @@ def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Cal
                         files.stage(target.name, lambda tmp: images.write_exr(tmp, picture, half=half)
                                     if fmt == "exr" else images.WRITERS[fmt](tmp, picture))
                         done += 1
-                        interrupt.hold("write", cancelled)
                         if cancelled():
                             raise BakeCancelled()
                     report(Progress("write", done / max(count, 1), f"Writing {name}"))
