@@ -384,6 +384,20 @@ def _box_inner(left, node):
                 node[k, HI + c] = max(node[l, HI + c], node[l + 1, HI + c])
 
 
+@numba.njit(cache=True, inline="always")
+def _misses_node(lo, hi, node, k):
+    """The box lo..hi and node k's box (float32, LO/HI columns) do not overlap."""
+    return (lo[0] > node[k, HI] or hi[0] < node[k, LO] or lo[1] > node[k, HI + 1] or hi[1] < node[k, LO + 1]
+            or lo[2] > node[k, HI + 2] or hi[2] < node[k, LO + 2])
+
+
+@numba.njit(cache=True, inline="always")
+def _misses_triangle(lo, hi, tri_lo, tri_hi, t):
+    """The box lo..hi and triangle t's box do not overlap."""
+    return (lo[0] > tri_hi[t, 0] or hi[0] < tri_lo[t, 0] or lo[1] > tri_hi[t, 1] or hi[1] < tri_lo[t, 1]
+            or lo[2] > tri_hi[t, 2] or hi[2] < tri_lo[t, 2])
+
+
 @numba.njit(cache=True, parallel=True)
 def _discs_meet(tri, tri_lo, tri_hi, order, node, left, first, count, origin, normal, reach, out):
     """out[i]: some triangle's box overlaps disc i's box and the triangle reaches its plane (both
@@ -402,8 +416,7 @@ def _discs_meet(tri, tri_lo, tri_hi, order, node, left, first, count, origin, no
         while sp > 0 and not out[i]:
             sp -= 1
             k = stack[sp]
-            if (lo[0] > node[k, HI] or hi[0] < node[k, LO] or lo[1] > node[k, HI + 1] or hi[1] < node[k, LO + 1]
-                    or lo[2] > node[k, HI + 2] or hi[2] < node[k, LO + 2]):
+            if _misses_node(lo, hi, node, k):
                 continue
             if left[k] >= 0:
                 stack[sp], stack[sp + 1] = left[k], left[k] + 1
@@ -411,8 +424,7 @@ def _discs_meet(tri, tri_lo, tri_hi, order, node, left, first, count, origin, no
                 continue
             for p in range(first[k], first[k] + count[k]):
                 t = order[p]
-                if (lo[0] > tri_hi[t, 0] or hi[0] < tri_lo[t, 0] or lo[1] > tri_hi[t, 1] or hi[1] < tri_lo[t, 1]
-                        or lo[2] > tri_hi[t, 2] or hi[2] < tri_lo[t, 2]):
+                if _misses_triangle(lo, hi, tri_lo, tri_hi, t):
                     continue
                 below = above = False
                 for v in range(3):
@@ -470,8 +482,7 @@ def _against(tri, facing, tri_lo, tri_hi, order, node, left, first, count, point
         while sp > 0 and not out[i]:
             sp -= 1
             k = stack[sp]
-            if (lo[0] > node[k, HI] or hi[0] < node[k, LO] or lo[1] > node[k, HI + 1] or hi[1] < node[k, LO + 1]
-                    or lo[2] > node[k, HI + 2] or hi[2] < node[k, LO + 2]):
+            if _misses_node(lo, hi, node, k):
                 continue
             if left[k] >= 0:
                 stack[sp], stack[sp + 1] = left[k], left[k] + 1
@@ -479,8 +490,7 @@ def _against(tri, facing, tri_lo, tri_hi, order, node, left, first, count, point
                 continue
             for p in range(first[k], first[k] + count[k]):
                 t = order[p]
-                if t == own[i] or (lo[0] > tri_hi[t, 0] or hi[0] < tri_lo[t, 0] or lo[1] > tri_hi[t, 1]
-                                   or hi[1] < tri_lo[t, 1] or lo[2] > tri_hi[t, 2] or hi[2] < tri_lo[t, 2]):
+                if t == own[i] or _misses_triangle(lo, hi, tri_lo, tri_hi, t):
                     continue
                 cos = facing[t, 0] * normal[i, 0] + facing[t, 1] * normal[i, 1] + facing[t, 2] * normal[i, 2]
                 if cos > -AGAINST:
