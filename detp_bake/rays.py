@@ -2,9 +2,12 @@
 validity, the discs' clearance, shadow rays, the photons) shares one RayCaster per bake."""
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from typing import Optional
 
 import numpy as np
+
+CHUNK = 1 << 16  # rays per work item of `blocked`
 
 
 class RayCaster:
@@ -36,3 +39,18 @@ class RayCaster:
     def occluded(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> np.ndarray:
         """Shadow rays: −1 where nothing lies within each ray's `tfar` (float32, overwritten)."""
         return self.scene.run(origins, dirs, dists=tfar, query="OCCLUDED")
+
+    def blocked(self, origins: np.ndarray, dirs: np.ndarray, far: np.ndarray, threads: int = 1) -> np.ndarray:
+        """Whether each ray meets anything before `far` (any float arrays), the rays split over
+        `threads` (one `occluded` call uses one core)."""
+        out = np.empty(len(origins), bool)
+
+        def run(a):
+            b = min(a + CHUNK, len(origins))
+            out[a:b] = self.occluded(np.ascontiguousarray(origins[a:b], np.float32),
+                                     np.ascontiguousarray(dirs[a:b], np.float32),
+                                     np.ascontiguousarray(far[a:b], np.float32)) >= 0
+
+        with ThreadPoolExecutor(max(1, int(threads))) as pool:
+            list(pool.map(run, range(0, len(origins), CHUNK)))
+        return out

@@ -17,7 +17,6 @@ plane above: 2.8 % error per texel, the mean within 0.3 %.
 """
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,13 +25,13 @@ from scipy.spatial import cKDTree
 from .charts import chart_widths
 from ..bvh import discs_meet_triangles
 from .texels import TexelSet, geometric_normals
+from .validity import blocked_between
 
 FRAGMENT = 8.0  # texels: charts narrower than this (charts.py's width) are not denoised as an image
 NEIGHBOURS = 24  # texels in each fragment texel's mean, itself included
 SIGMA = 1.5  # the Gaussian's width, texel sizes; neighbours beyond 3 SIGMA are left out
 COS = 0.9  # shading normals at least this aligned count as one surface
 LIFT = 0.25  # texel sizes: rays between neighbours pass this far above the surface (over a convex curve's chord)
-CHUNK = 1 << 16  # rays per work item
 
 
 @dataclass
@@ -63,21 +62,6 @@ def fragment_texels(texels: TexelSet, lm, scene) -> np.ndarray:
     return np.flatnonzero(width[chart[own]] < FRAGMENT)
 
 
-def _blocked(caster, origin, way, far, threads) -> np.ndarray:
-    """Whether each ray meets anything before `far`, the rays split over `threads`."""
-    out = np.empty(len(origin), bool)
-
-    def run(a):
-        b = min(a + CHUNK, len(origin))
-        out[a:b] = caster.occluded(np.ascontiguousarray(origin[a:b], np.float32),
-                                   np.ascontiguousarray(way[a:b], np.float32),
-                                   np.ascontiguousarray(far[a:b], np.float32)) >= 0
-
-    with ThreadPoolExecutor(max(1, threads)) as pool:
-        list(pool.map(run, range(0, len(origin), CHUNK)))
-    return out
-
-
 def find(texels: TexelSet, lm, scene, caster, threads: int = 1) -> Fragments | None:
     """The fragments of lightmap `lm` and their neighbours (module docstring), or None when it has
     none."""
@@ -103,11 +87,9 @@ def find(texels: TexelSet, lm, scene, caster, threads: int = 1) -> Fragments | N
     other = found & (near != local[:, None]) & crossed[:, None]
     f, j = np.nonzero(other)
     if f.size:
-        a = lifted[f]
-        span = pos[near[f, j]] + LIFT * size * geometric_normals(scene, tri[near[f, j]], nrm[near[f, j]]) - a
-        length = np.linalg.norm(span, axis=1)
-        seen = ~_blocked(caster, a, span / np.maximum(length, 1e-300)[:, None], length, threads)
-        found[f, j] = seen
+        blocked, _ = blocked_between(texels, local[f] + lm.offset, near[f, j] + lm.offset, LIFT * size, caster,
+                                     scene, threads)
+        found[f, j] = ~blocked
     area = texels.area[sl]
     weight = np.where(found, area[near] * np.exp(-0.5 * (np.where(found, dist, 0.0) / (SIGMA * size)) ** 2), 0.0)
     alone = ~(weight.sum(axis=1) > 0)  # a texel of no area with every neighbour hidden keeps its own value

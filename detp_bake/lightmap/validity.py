@@ -318,6 +318,18 @@ def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
     return cuts
 
 
+def blocked_between(texels: TexelSet, i: np.ndarray, j: np.ndarray, lift: float, caster, scene,
+                    threads: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """(whether a ray from texel i's sample point to texel j's, both lifted `lift` metres off their
+    faces, meets anything on the way; the rays' lengths) for the texel pairs (i, j)."""
+    gi = geometric_normals(scene, texels.triangle[i], texels.normal[i])
+    gj = geometric_normals(scene, texels.triangle[j], texels.normal[j])
+    a = texels.position[i] + lift * gi
+    span = texels.position[j] + lift * gj - a
+    length = np.linalg.norm(span, axis=1)
+    return caster.blocked(a, span / np.maximum(length, 1e-300)[:, None], length, threads), length
+
+
 def regions(texels: TexelSet, lm, cuts: Cuts, caster, scene) -> np.ndarray:
     """(H, W) int32 image of lightmap `lm`: each covered texel's group of texels that see each other
     along the surface (0, 1, …; −1 in the gutter). Neighbours (8 ways) are linked unless a ray
@@ -336,17 +348,8 @@ def regions(texels: TexelSet, lm, cuts: Cuts, caster, scene) -> np.ndarray:
     keep = np.ones(len(pairs), bool)
     test = np.flatnonzero(cut[pairs[:, 0]] | cut[pairs[:, 1]])
     if test.size:
-        i, j = pairs[test, 0] + lm.offset, pairs[test, 1] + lm.offset
-        lift = LIFT * lm.texel_size
-        gi = geometric_normals(scene, texels.triangle[i], texels.normal[i])
-        gj = geometric_normals(scene, texels.triangle[j], texels.normal[j])
-        a = texels.position[i] + lift * gi
-        span = texels.position[j] + lift * gj - a
-        length = np.linalg.norm(span, axis=1)
-        way = span / np.maximum(length, 1e-300)[:, None]
-        far = length.astype(np.float32)
-        blocked = caster.occluded(np.ascontiguousarray(a, np.float32), np.ascontiguousarray(way, np.float32),
-                                  far) >= 0
+        blocked, length = blocked_between(texels, pairs[test, 0] + lm.offset, pairs[test, 1] + lm.offset,
+                                          LIFT * lm.texel_size, caster, scene)
         # Neighbours in the image that lie far apart on the surface are two charts side by side in
         # the atlas: the denoiser has always seen them as one image, and no wall is to blame.
         near = (length > 0) & (length < NEIGHBOURS * lm.texel_size)
