@@ -341,9 +341,17 @@ class _Pipeline:
                         for lm in texels.lightmaps if settings.denoise and (texels.cuts.of[lm.texels] >= 0).any()}
         self.validity_seconds += time.perf_counter() - t1
         # Texels of charts too narrow for OIDN take their neighbours' mean on the surface (fragments.py),
-        # found lightmap by lightmap as each is denoised.
-        self.fragments_of = partial(fragments_mod.find, texels, scene=scene, caster=self.caster,
-                                    threads=self.threads) if settings.denoise else None
+        # found lightmap by lightmap as each is denoised; a comparison's estimators share them (one
+        # bake keeps none after its lightmap is done).
+        self.fragments_of = None
+        if settings.denoise:
+            find = partial(fragments_mod.find, texels, scene=scene, caster=self.caster, threads=self.threads)
+            if len(self.names) > 1:
+                found = {}
+                self.fragments_of = lambda lm: found[lm.name] if lm.name in found else found.setdefault(lm.name,
+                                                                                                        find(lm))
+            else:
+                self.fragments_of = find
         results = {name: self._result(name) for name in self.names}
         if self.offset.any():
             texels.position += self.offset  # back where the texels are, in world space
