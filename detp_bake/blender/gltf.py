@@ -1,0 +1,310 @@
+"""A baked scene as a .glb through Blender's own glTF exporter, each baked object's lightmap on its
+materials as MOZ_lightmap (docs/gltf.md).
+
+The exporter writes the scene; a user extension of the exporter (`glTF2ExportUserExtension`, found
+by the exporter in an enabled add-on's module, so this module is listed as one for the export's
+duration) adds the lightmap to each material it gathers. For that the scene is prepared, and put
+back exactly afterwards, whatever happens (`_prepared`):
+
+- each baked object gets a temporary copy of its mesh whose UV layers run render UVs first (glTF's
+  TEXCOORD_0), then the lightmap layer (TEXCOORD_1), then the rest: the exporter writes UV layers
+  in order;
+- each of its material slots gets a temporary copy of the user's own material, one per (material,
+  lightmap image) pair, without the node frame *Apply* wires in: the exporter keeps one glTF
+  material per Blender material, and a lightmap is per object.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Callable, Optional
+
+import bpy
+import numpy as np
+
+from ..errors import BakeError
+from ..lightmap import encoding, images
+from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY
+
+EXTENSION = "MOZ_lightmap"
+ENCODING = "RGBE"
+TEMP = " (detp_bake glTF)"  # the temporary copies' names end with this
+LINEAR, CLAMP = 9729, 33071  # glTF sampler constants
+
+
+def lightmap_files(out_dir, estimator: Optional[str] = None) -> tuple[str, dict]:
+    """The estimator and {object name: EXR path} of the bake in `out_dir`, read off its report.json
+    (a comparison's: the section of `estimator`). Objects whose entries name the same EXR (an atlas)
+    share that path and so one image."""
+    out_dir = Path(out_dir)
+    path = out_dir / "report.json"
+    try:
+        report = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise BakeError(f"no report.json in '{out_dir}': give the output folder of a bake") from None
+    except (OSError, ValueError) as exc:
+        raise BakeError(f"cannot read '{path}': {exc}") from None
+    if "frames" in report:
+        raise BakeError(f"'{path}' is a frame range's report: the glTF export takes one bake")
+    sections = report.get("estimators") or {report.get("settings", {}).get("estimator") or report.get("estimator"):
+                                            report}
+    if estimator is None and len(sections) > 1:
+        raise BakeError(f"'{path}' holds lightmaps of {', '.join(sections)}: choose one with --estimator")
+    estimator = estimator or next(iter(sections))
+    if estimator not in sections:
+        raise BakeError(f"'{path}' has no {estimator} lightmaps (it has {', '.join(map(str, sections))})")
+    files = {}
+    for entry in sections[estimator].get("objects", []):
+        exr = [p for p in entry.get("files", []) if p.endswith(f".{estimator}.exr") and not p.endswith(".raw.exr")]
+        if not exr:
+            raise BakeError(f"object '{entry['name']}' has no EXR lightmap in '{path}': bake with the exr format")
+        found = exr[0] if os.path.isfile(exr[0]) else str(out_dir / os.path.basename(exr[0]))  # a moved folder
+        if not os.path.isfile(found):
+            raise BakeError(f"lightmap '{exr[0]}' of object '{entry['name']}' is missing")
+        files[entry["name"]] = found
+    if not files:
+        raise BakeError(f"'{path}' lists no baked objects")
+    return estimator, files
+
+
+def _targets(bl_scene, files: dict, uv_layer) -> dict:
+    """{object: lightmap UV layer name} for the baked objects, every one checked first."""
+    targets = {}
+    for name in files:
+        obj = bl_scene.objects.get(name)
+        if obj is None:
+            raise BakeError(f"object '{name}' of report.json is not in scene '{bl_scene.name}'")
+        if obj.type != "MESH":
+            raise BakeError(f"object '{name}' of report.json is not a mesh")
+        layer = (uv_layer.get(name) if isinstance(uv_layer, dict) else uv_layer) or DEFAULT_UV
+        if layer not in obj.data.uv_layers:
+            raise BakeError(f"object '{name}' has no UV layer '{layer}' (its lightmap's UVs)")
+        targets[obj] = layer
+    return targets
+
+
+def export_gltf(bl_scene, out_dir, path, estimator: Optional[str] = None, uv_layer=None,
+                log: Callable[[str], None] = print) -> dict:
+    """Write `bl_scene` to the .glb `path` with the lightmaps of the bake in `out_dir`; the scene is
+    left exactly as it was. `uv_layer`: one name, {object name: name}, or None for DEFAULT_UV.
+    Returns a summary: the file, the estimator, the objects and images."""
+    path = Path(path).resolve()
+    if path.suffix.lower() != ".glb":
+        raise BakeError(f"'{path}': the glTF export writes a binary .glb file")
+    images.check_writable_dir(path.parent)
+    estimator, files = lightmap_files(out_dir, estimator)
+    targets = _targets(bl_scene, files, uv_layer)
+    if bpy.context.scene != bl_scene:
+        raise BakeError(f"scene '{bl_scene.name}' is not the active scene: the glTF exporter writes the active one")
+    pngs = {exr: encoding.png_bytes(encoding.rgbe_encode(images.read_image(exr)))
+            for exr in dict.fromkeys(files.values())}
+    state = _State(pngs)
+    with _prepared(targets, files, state), _listed_as_addon():
+        result = bpy.ops.export_scene.gltf(
+            filepath=str(path), export_format="GLB", use_active_scene=True, use_renderable=True,
+            export_apply=True, export_texcoords=True, export_normals=True, export_materials="EXPORT",
+            export_animations=False)
+    missed = sorted(state.gltf_names[m] for m in state.materials if m not in state.done)
+    if state.errors or missed or "FINISHED" not in result:
+        raise BakeError(f"glTF export of '{path}' failed: " +
+                        "; ".join(state.errors or [f"no lightmap on material {', '.join(missed)}"]))
+    log(f"exported {path} with {len(pngs)} {estimator} lightmaps on {len(targets)} objects")
+    return {"gltf": str(path), "estimator": estimator, "objects": sorted(files), "images": len(pngs)}
+
+
+class _State:
+    """What the export hook reads: which temporary material shows which lightmap, and names to
+    give back; filled by `_prepared`."""
+
+    def __init__(self, pngs: dict):
+        self.pngs = pngs  # EXR path -> RGBE PNG bytes
+        self.materials = {}  # temporary material name -> EXR path
+        self.pairs = {}  # (user's material name, EXR path) -> temporary material name
+        self.gltf_names = {}  # temporary material or mesh name -> the name the glTF shows
+        self.textures = {}  # EXR path -> glTF texture, made once
+        self.sampler = None  # the one sampler all lightmaps share
+        self.done, self.errors = set(), []
+
+
+_STATE: Optional[_State] = None
+
+
+class glTF2ExportUserExtension:
+    """The exporter's hook: MOZ_lightmap on the materials of baked objects, the user's names on
+    the temporary copies. The exporter logs and swallows a hook's exceptions, so they are kept."""
+
+    def gather_material_hook(self, gltf_material, blender_material, export_settings):
+        state = _STATE
+        name = getattr(blender_material, "original", blender_material).name
+        if state is None or name not in state.materials:
+            return
+        try:
+            exr = state.materials[name]
+            gltf_material.name = state.gltf_names[name]
+            if gltf_material.extensions is None:
+                gltf_material.extensions = {}
+            gltf_material.extensions[EXTENSION] = _extension(state, exr)
+            state.done.add(name)
+        except Exception as exc:  # noqa: BLE001 (the exporter would hide it)
+            state.errors.append(f"material '{name}': {exc!r}")
+
+    def gather_mesh_hook(self, gltf_mesh, blender_mesh, blender_object, vertex_groups, modifiers, materials,
+                         export_settings):
+        state = _STATE
+        name = getattr(blender_mesh, "original", blender_mesh).name
+        if state is not None and name in state.gltf_names:
+            gltf_mesh.name = state.gltf_names[name]
+
+
+def _extension(state: _State, exr: str):
+    """The MOZ_lightmap of a material: one texture per lightmap image, its PNG in the .glb."""
+    from io_scene_gltf2.io.com import gltf2_io
+    from io_scene_gltf2.io.com.gltf2_io_extensions import Extension
+    from io_scene_gltf2.io.exp.binary_data import BinaryData
+    texture = state.textures.get(exr)
+    if texture is None:
+        stem = os.path.basename(exr)[:-len(".exr")]
+        image = gltf2_io.Image(buffer_view=BinaryData(state.pngs[exr]), extensions=None, extras=None,
+                               mime_type="image/png", name=stem, uri=None)
+        if state.sampler is None:
+            state.sampler = gltf2_io.Sampler(extensions=None, extras=None, mag_filter=LINEAR, min_filter=LINEAR,
+                                             name=None, wrap_s=CLAMP, wrap_t=CLAMP)
+        texture = state.textures[exr] = gltf2_io.Texture(extensions=None, extras=None, name=stem,
+                                                         sampler=state.sampler, source=image)
+    return Extension(name=EXTENSION, required=False, extension={
+        "index": texture, "texCoord": 1, "intensity": 1.0, "extras": {"encoding": ENCODING}})
+
+
+@contextlib.contextmanager
+def _listed_as_addon():
+    """The exporter looks for user extensions in the modules of enabled add-ons: this module is
+    listed as one while the export runs, then the list (and its unsaved mark) is as before."""
+    global _STATE
+    prefs = bpy.context.preferences
+    dirty = prefs.is_dirty
+    entry = prefs.addons.new()
+    entry.module = __name__
+    try:
+        yield
+    finally:
+        prefs.addons.remove(entry)
+        prefs.is_dirty = dirty
+        _STATE = None
+
+
+@contextlib.contextmanager
+def _prepared(targets: dict, files: dict, state: _State):
+    """The scene as the exporter should see it (module docstring), put back on the way out."""
+    global _STATE
+    meshes, made, slots = {}, [], []
+    try:
+        for obj, layer in targets.items():
+            original = obj.data
+            copy = original.copy()
+            copy.name = original.name + TEMP
+            meshes[obj] = original
+            made.append(copy)
+            state.gltf_names[copy.name] = original.name
+            _order_uvs(copy, layer)
+            obj.data = copy
+            for index, slot in enumerate(obj.material_slots):
+                temp = _material_for(obj, index, files[obj.name], state, made)
+                if slot.link == "OBJECT":
+                    slots.append((slot, slot.material))
+                    slot.material = temp
+                else:
+                    copy.materials[index] = temp
+            if not obj.material_slots:
+                copy.materials.append(_material_for(obj, 0, files[obj.name], state, made))
+        _name_split_materials(state)
+        _STATE = state
+        yield
+    finally:
+        _STATE = None
+        for slot, material in reversed(slots):
+            slot.material = material
+        for obj, original in meshes.items():
+            obj.data = original
+        for block in reversed(made):
+            (bpy.data.meshes if isinstance(block, bpy.types.Mesh) else bpy.data.materials).remove(block)
+
+
+def _user_material(obj, index: int):
+    """The material the user gave slot `index`: the one *Apply* replaced by a copy, if it did."""
+    slot = obj.material_slots[index] if index < len(obj.material_slots) else None
+    record = json.loads(obj[REVERT_KEY]) if REVERT_KEY in obj else {"slots": []}
+    for entry in record["slots"]:
+        if entry["index"] == index and entry["copy"] is not None:
+            return bpy.data.materials.get(entry["original"]) if entry["original"] else None
+    return slot.material if slot is not None else None
+
+
+def _material_for(obj, index: int, exr: str, state: _State, made: list):
+    """The temporary material of slot `index`, one per (user's material, lightmap image)."""
+    user = _user_material(obj, index)
+    key = (user.name if user is not None else f"{obj.name} lightmap", exr)
+    if key in state.pairs:
+        return bpy.data.materials[state.pairs[key]]
+    if user is not None:
+        temp = user.copy()
+    else:
+        temp = bpy.data.materials.new(key[0])
+        if temp.node_tree is None or bpy.app.version < (5, 0, 0):
+            temp.use_nodes = True  # Blender 5 gives every material a node tree
+    temp.name = key[0] + TEMP
+    made.append(temp)
+    if temp.node_tree is not None and temp.node_tree.nodes.get(FRAME_NAME) is not None:
+        _without_frame(temp)
+    state.materials[temp.name] = exr
+    state.pairs[key] = temp.name
+    state.gltf_names[temp.name] = key[0]
+    return temp
+
+
+def _name_split_materials(state: _State) -> None:
+    """A material split over several lightmaps is named after each: 'White (Floor.texel_histogram)'."""
+    images_of = {}
+    for user, exr in state.pairs:
+        images_of.setdefault(user, set()).add(exr)
+    for (user, exr), temp in state.pairs.items():
+        if len(images_of[user]) > 1:
+            state.gltf_names[temp] = f"{user} ({os.path.basename(exr)[:-len('.exr')]})"
+
+
+def _without_frame(mat) -> None:
+    """Remove *Apply*'s node frame from a temporary copy, its output active again as before."""
+    nt = mat.node_tree
+    frame = nt.nodes[FRAME_NAME]
+    for node in [n for n in nt.nodes if n.parent == frame]:
+        nt.nodes.remove(node)
+    nt.nodes.remove(frame)
+    for name in json.loads(mat.get(REVERT_KEY, "{}")).get("active_outputs", []):
+        if nt.nodes.get(name) is not None:
+            nt.nodes[name].is_active_output = True
+    if REVERT_KEY in mat:
+        del mat[REVERT_KEY]
+
+
+def _order_uvs(mesh, lightmap: str) -> None:
+    """Render UVs first, the lightmap layer second, the rest after, render UVs active: glTF's
+    TEXCOORD_0 and TEXCOORD_1. A mesh with only the lightmap layer gets a copy of it first."""
+    layers = mesh.uv_layers
+    names = [layer.name for layer in layers]
+    render = next((n for n in names if layers[n].active_render and n != lightmap), None)
+    render = render or next((n for n in names if n != lightmap), None)
+    data = {}
+    for name in names:
+        uv = np.empty(2 * len(mesh.loops), np.float32)
+        layers[name].uv.foreach_get("vector", uv)
+        data[name] = uv
+    order = [render, lightmap] + [n for n in names if n not in (render, lightmap)]
+    for name in names:
+        layers.remove(layers[name])
+    for name in order:
+        layer = layers.new(name=name or lightmap + " render", do_init=False)
+        layer.uv.foreach_set("vector", data[name or lightmap])
+    layers.active_index = 0
+    layers[0].active_render = True
