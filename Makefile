@@ -16,7 +16,7 @@ PYTEST_ARGS ?=
 CORE_HASH := $(shell cat $$(find detp_bake -name '*.py' | sort) | cksum | cut -d' ' -f1)
 DEMO_OUT ?= build/demo
 
-.PHONY: demo test test-4.5 test-4.5-blender test-5.2 test-core bench bench-full clean env
+.PHONY: demo test test-4.5 test-4.5-blender test-5.2 test-core bench bench-full clean env viewer viewer-node chromium
 
 $(VENV45)/.installed: requirements/blender-4.5.txt
 	@test -n "$(PY311)" || { echo "error: Python 3.11 not found (needed for the Blender 4.5 LTS line)"; exit 1; }
@@ -56,11 +56,11 @@ test-4.5: $(VENV45)/.installed
 	NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-4.5-$(CORE_HASH) $(VENV45)/bin/python -m pytest tests $(PYTEST_ARGS)
 
 # The 4.5 line in `make test`: exactly the tests test-core skipped for want of bpy.
-test-4.5-blender: test-core $(VENV45)/.installed
+test-4.5-blender: test-core $(VENV45)/.installed viewer-node chromium
 	@test -s $(NEEDS_BLENDER) || { echo "error: test-core named no Blender test ($(NEEDS_BLENDER))"; exit 1; }
 	NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-4.5-$(CORE_HASH) $(VENV45)/bin/python -m pytest @$(NEEDS_BLENDER) $(PYTEST_ARGS)
 
-test-5.2:
+test-5.2: viewer-node chromium
 	@if [ -z "$(PY313)" ]; then \
 		echo "!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!"; \
 		echo "!! Python 3.13 not found: the Blender 5.2 LTS line is NOT tested on this machine"; \
@@ -78,6 +78,50 @@ test-5.2:
 OUTPUT_SYNC := $(if $(filter output-sync,$(.FEATURES)),--output-sync=target,)
 test:
 	$(MAKE) --no-print-directory -j2 $(OUTPUT_SYNC) test-4.5-blender test-5.2
+
+# The web viewer (viewer/, docs/viewer.md) and its browser test (tests/test_viewer.py): three.js and
+# playwright-core from package-lock.json, and Debian's chromium. Neither failing stops the build:
+# the browser test then skips, saying which is missing.
+VIEWER_NODE := viewer/node_modules/.installed
+$(VIEWER_NODE): viewer/package-lock.json
+	@if ! command -v npm >/dev/null 2>&1; then \
+		echo "!! npm not found: viewer/node_modules not installed (make viewer and tests/test_viewer.py need it)"; \
+	elif npm ci --prefix viewer --no-audit --no-fund --loglevel=error; then \
+		touch $@; \
+	else \
+		echo "!! npm ci --prefix viewer failed: tests/test_viewer.py will skip"; \
+	fi
+
+viewer-node: $(VIEWER_NODE)
+
+chromium:
+	@if [ -x /usr/bin/chromium ]; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		mkdir -p .cache && echo "installing Debian's chromium for tests/test_viewer.py (log: .cache/apt-chromium.log)"; \
+		{ apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends chromium; } \
+			>.cache/apt-chromium.log 2>&1 \
+			|| echo "!! apt-get install chromium failed (.cache/apt-chromium.log): tests/test_viewer.py will skip"; \
+	else \
+		echo "!! /usr/bin/chromium not found: tests/test_viewer.py will skip (install it: sudo apt-get install chromium)"; \
+	fi
+
+# make viewer [MODEL=path/to/scene.glb] [VIEWER_PORT=8000]: serve the repository and print the URL.
+# A model outside the repository is linked under build/viewer/ so the server can reach it.
+VIEWER_PORT ?= 8000
+MODEL ?=
+viewer: viewer-node
+	@test -f $(VIEWER_NODE) || { echo "error: viewer/node_modules is missing (npm ci --prefix viewer)"; exit 1; }
+	@url="http://127.0.0.1:$(VIEWER_PORT)/viewer/index.html"; \
+	if [ -n "$(MODEL)" ]; then \
+		model="$$(realpath "$(MODEL)")" || exit 1; \
+		case "$$model" in \
+			"$(CURDIR)"/*) rel="$${model#$(CURDIR)/}";; \
+			*) mkdir -p build/viewer && ln -sf "$$model" "build/viewer/$$(basename "$$model")" && rel="build/viewer/$$(basename "$$model")";; \
+		esac; \
+		url="$$url?model=/$$rel"; \
+	fi; \
+	echo "open $$url  (or drop a .glb on the page; Ctrl+C stops the server)"; \
+	exec python3 -m http.server $(VIEWER_PORT) --bind 127.0.0.1 --directory "$(CURDIR)" >/dev/null
 
 # Extension zips, one per Blender line and platform of blender_manifest.toml, each with that line's
 # wheels only (cp311 for 4.5, cp313 for 5.2; numpy is Blender's own):

@@ -1,0 +1,204 @@
+// GLTFLoader plugin for MOZ_lightmap as detp_bake writes it: an RGBE PNG on the second UV set.
+//
+// The PNG's alpha is a shared exponent, not a coverage, so the browser must never see it as an
+// image: premultiplying, colour-managing or sRGB-decoding it would change the numbers. The plugin
+// therefore reads the PNG bytes itself (decodePng below), decodes RGBE to linear floats and uploads
+// a half-float DataTexture. See docs/viewer.md.
+import {
+  ClampToEdgeWrapping, DataTexture, DataUtils, HalfFloatType, LinearFilter, LinearSRGBColorSpace,
+  LoaderUtils, MeshBasicMaterial, MirroredRepeatWrapping, RepeatWrapping, RGBAFormat,
+} from 'three';
+
+const NAME = 'MOZ_lightmap';
+const HALF_MAX = 65504;
+const WRAP = { 33071: ClampToEdgeWrapping, 33648: MirroredRepeatWrapping, 10497: RepeatWrapping };
+
+// --- PNG (8-bit RGBA or RGB, not interlaced): enough for the lightmaps, and exact ---------------
+
+const PNG_SIGNATURE = [137, 80, 78, 71, 13, 10, 26, 10];
+
+async function inflate(bytes) {
+  // PNG's IDAT stream is zlib-wrapped deflate, which DecompressionStream calls 'deflate'.
+  const stream = new Blob([bytes]).stream().pipeThrough(new DecompressionStream('deflate'));
+  return new Uint8Array(await new Response(stream).arrayBuffer());
+}
+
+function paeth(a, b, c) {
+  const p = a + b - c;
+  const pa = Math.abs(p - a), pb = Math.abs(p - b), pc = Math.abs(p - c);
+  if (pa <= pb && pa <= pc) return a;
+  return pb <= pc ? b : c;
+}
+
+// Undo the per-row filters in place; returns the rows without their filter bytes.
+function unfilter(raw, width, height, bpp) {
+  const stride = width * bpp;
+  const out = new Uint8Array(stride * height);
+  for (let y = 0; y < height; y++) {
+    const filter = raw[y * (stride + 1)];
+    const src = y * (stride + 1) + 1;
+    const row = y * stride, prev = row - stride;
+    for (let x = 0; x < stride; x++) {
+      const left = x >= bpp ? out[row + x - bpp] : 0;
+      const up = y > 0 ? out[prev + x] : 0;
+      const upLeft = y > 0 && x >= bpp ? out[prev + x - bpp] : 0;
+      let v = raw[src + x];
+      if (filter === 1) v += left;
+      else if (filter === 2) v += up;
+      else if (filter === 3) v += (left + up) >> 1;
+      else if (filter === 4) v += paeth(left, up, upLeft);
+      else if (filter !== 0) throw new Error(`PNG: unknown row filter ${filter}`);
+      out[row + x] = v & 255;
+    }
+  }
+  return out;
+}
+
+// The PNG's pixels as RGBA bytes, top row first, exactly as stored (no gamma, no profile).
+export async function decodePng(buffer) {
+  const bytes = new Uint8Array(buffer);
+  const view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
+  if (!PNG_SIGNATURE.every((b, i) => bytes[i] === b)) throw new Error('not a PNG image');
+  let width = 0, height = 0, colourType = 0;
+  const idat = [];
+  for (let at = 8; at + 8 <= bytes.length;) {
+    const length = view.getUint32(at);
+    const type = String.fromCharCode(...bytes.subarray(at + 4, at + 8));
+    const data = bytes.subarray(at + 8, at + 8 + length);
+    if (type === 'IHDR') {
+      width = view.getUint32(at + 8);
+      height = view.getUint32(at + 12);
+      const depth = data[8];
+      colourType = data[9];
+      if (depth !== 8 || (colourType !== 6 && colourType !== 2) || data[12] !== 0) {
+        throw new Error(`PNG: lightmaps must be 8-bit RGBA, not interlaced (bit depth ${depth}, colour type ${colourType}, interlace ${data[12]})`);
+      }
+    } else if (type === 'IDAT') {
+      idat.push(data);
+    } else if (type === 'IEND') {
+      break;
+    }
+    at += 12 + length;
+  }
+  const bpp = colourType === 6 ? 4 : 3;
+  const pixels = unfilter(await inflate(new Blob(idat)), width, height, bpp);
+  if (bpp === 4) return { width, height, data: pixels };
+  const rgba = new Uint8Array(width * height * 4).fill(255);
+  for (let i = 0, j = 0; i < pixels.length; i += 3, j += 4) rgba.set(pixels.subarray(i, i + 3), j);
+  return { width, height, data: rgba };
+}
+
+// --- RGBE --------------------------------------------------------------------------------------
+
+// Linear RGB of one RGBE texel, exactly as detp_bake/lightmap/encoding.py decodes it:
+// byte · 2^(E − 136), i.e. byte / 256 · 2^(E − 128), with E = 0 black. The encoder rounds each
+// mantissa to nearest, so there is no half-step to add back (Radiance's own +0.5 is for truncation).
+export function decodeRgbe(r, g, b, e) {
+  if (e === 0) return [0, 0, 0];
+  const scale = Math.pow(2, e - 136);
+  return [r * scale, g * scale, b * scale];
+}
+
+export function rgbeToHalfFloat(image) {
+  const { width, height, data } = image;
+  const half = new Uint16Array(width * height * 4);
+  const one = DataUtils.toHalfFloat(1);
+  for (let i = 0; i < width * height * 4; i += 4) {
+    const rgb = decodeRgbe(data[i], data[i + 1], data[i + 2], data[i + 3]);
+    for (let c = 0; c < 3; c++) half[i + c] = DataUtils.toHalfFloat(Math.min(rgb[c], HALF_MAX));
+    half[i + 3] = one;
+  }
+  return half;
+}
+
+// --- the plugin ----------------------------------------------------------------------------------
+
+export class MozLightmap {
+  constructor(parser) {
+    this.parser = parser;
+    this.name = NAME;
+    this.textures = new Map(); // texture index -> Promise<DataTexture>, shared by materials
+  }
+
+  async imageBytes(imageIndex) {
+    const def = this.parser.json.images[imageIndex];
+    if (def.bufferView !== undefined) return this.parser.getDependency('bufferView', def.bufferView);
+    const url = LoaderUtils.resolveURL(def.uri, this.parser.options.path);
+    const response = await fetch(url);
+    if (!response.ok) throw new Error(`${NAME}: ${url}: HTTP ${response.status}`);
+    return response.arrayBuffer();
+  }
+
+  loadLightmap(textureIndex, texCoord) {
+    const key = `${textureIndex}:${texCoord}`;
+    if (!this.textures.has(key)) {
+      this.textures.set(key, (async () => {
+        const textureDef = this.parser.json.textures[textureIndex];
+        const image = await decodePng(await this.imageBytes(textureDef.source));
+        const texture = new DataTexture(rgbeToHalfFloat(image), image.width, image.height, RGBAFormat, HalfFloatType);
+        // glTF's UV origin is the image's top-left and decodePng returns the top row first.
+        texture.flipY = false;
+        texture.colorSpace = LinearSRGBColorSpace;
+        texture.channel = texCoord;
+        texture.magFilter = LinearFilter;
+        texture.minFilter = LinearFilter; // no mipmaps: half-float mipmap generation is not portable
+        texture.generateMipmaps = false;
+        const sampler = this.parser.json.samplers?.[textureDef.sampler] ?? {};
+        texture.wrapS = WRAP[sampler.wrapS] ?? RepeatWrapping;
+        texture.wrapT = WRAP[sampler.wrapT] ?? RepeatWrapping;
+        texture.name = this.parser.json.images[textureDef.source].name ?? `lightmap ${textureIndex}`;
+        texture.needsUpdate = true;
+        return texture;
+      })());
+    }
+    return this.textures.get(key);
+  }
+
+  // The glTF material's lightmap, kept for afterRoot; the loader still builds its usual material.
+  async extendMaterialParams(materialIndex, params) {
+    const ext = this.parser.json.materials[materialIndex].extensions?.[NAME];
+    if (!ext) return;
+    const encoding = ext.extras?.encoding ?? 'RGBE';
+    if (encoding !== 'RGBE') throw new Error(`${NAME}: unsupported encoding '${encoding}'`);
+    params.lightMap = await this.loadLightmap(ext.index, ext.texCoord ?? 0);
+    // three.js reads a lightMap as irradiance E and shows albedo × E / π; ours hold E/π already.
+    params.lightMapIntensity = Math.PI * (ext.intensity ?? 1);
+  }
+
+  // Every lightmapped mesh gets an unlit material: base colour (factor × texture) × lightmap, as
+  // Blender's Apply shows it, so the scene is lit by its lightmaps alone.
+  afterRoot(result) {
+    const unlit = new Map();
+    for (const scene of result.scenes) {
+      scene.traverse((object) => {
+        if (!object.isMesh) return;
+        const swap = (material) => {
+          const ref = this.parser.associations.get(material);
+          if (ref?.materials === undefined || !this.parser.json.materials[ref.materials].extensions?.[NAME]) return material;
+          if (!unlit.has(material)) unlit.set(material, toUnlit(material));
+          return unlit.get(material);
+        };
+        object.material = Array.isArray(object.material) ? object.material.map(swap) : swap(object.material);
+      });
+    }
+  }
+}
+
+function toUnlit(source) {
+  const material = new MeshBasicMaterial({
+    name: source.name,
+    color: source.color.clone(),
+    map: source.map,
+    lightMap: source.lightMap,
+    lightMapIntensity: source.lightMapIntensity,
+    opacity: source.opacity,
+    transparent: source.transparent,
+    alphaTest: source.alphaTest,
+    depthWrite: source.depthWrite,
+    side: source.side,
+    vertexColors: source.vertexColors,
+  });
+  material.userData = { ...source.userData, lightmapped: true };
+  source.dispose();
+  return material;
+}
