@@ -85,11 +85,12 @@ def _grow(mask: np.ndarray, rings: int) -> np.ndarray:
     return grown
 
 
-def fill_gutter(image: np.ndarray, mask: np.ndarray, rings: int = FILL_RINGS) -> np.ndarray:
+def fill_gutter(image: np.ndarray, mask: np.ndarray, rings: int = FILL_RINGS, in_place: bool = False) -> np.ndarray:
     """Every texel of `image` given a value that continues the covered ones smoothly: `rings` of
     neighbour-mean extension (`texels.dilate`), then the mean of the covered texels beyond, so no
-    texel the denoiser sees is an artificial 0 (or garbage from an earlier pass)."""
-    out = dilate(image, mask, rings)
+    texel the denoiser sees is an artificial 0 (or garbage from an earlier pass). `in_place`: fill
+    `image` itself (float32) rather than a copy."""
+    out = dilate(image, mask, rings, in_place=in_place)
     reached = _grow(mask, rings)
     if not reached.all():
         out[~reached] = image[mask].mean(axis=0, dtype=np.float64) if mask.any() else 0.0
@@ -248,7 +249,7 @@ def _denoise_part(image, mask, albedo, normal, filter, keep_energy, quality, wei
         raw_mean = np.average(covered, axis=0, weights=w)
     del covered
 
-    color = fill_gutter(src, mask)
+    color = fill_gutter(src, mask, in_place=True)
     del src
     kwargs = {}
     if filter == "RT":

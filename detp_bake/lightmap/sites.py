@@ -41,9 +41,9 @@ REACH = 2.0  # a corner further than REACH × spacing × texel size is another s
 @dataclass
 class Sites:
     texels: TexelSet  # the sites, as a TexelSet for the estimators
-    index: np.ndarray  # (M,) each site's texel in the full set
-    source: np.ndarray  # (N, 4) int32: the sites each texel blends (0 where unused)
-    weight: np.ndarray  # (N, 4) float64: their weights (sum 1 per texel)
+    index: np.ndarray  # (M,) each site's texel in the full set (empty when every texel is a site)
+    source: np.ndarray  # (N, 4) int32: the sites each texel blends (0 where unused; empty likewise)
+    weight: np.ndarray  # (N, 4) float64: their weights (sum 1 per texel; empty likewise)
     spacing: int  # the largest of the lightmaps' spacings (1: every texel is a site)
 
     def expand(self, values: np.ndarray) -> np.ndarray:
@@ -58,12 +58,9 @@ class Sites:
 
 
 def every_texel(texels: TexelSet) -> Sites:
-    n = len(texels)
-    source = np.zeros((n, 4), np.int32)
-    source[:, 0] = np.arange(n)
-    weight = np.zeros((n, 4))
-    weight[:, 0] = 1.0
-    return Sites(texels, np.arange(n), source, weight, 1)
+    """Every texel its own site: `expand` and `of_sites` pass arrays through, so the blend tables
+    stay empty (at 2048² they would hold 56 bytes a texel for nothing)."""
+    return Sites(texels, np.empty(0, np.int64), np.empty((0, 4), np.int32), np.empty((0, 4)), 1)
 
 
 def spacings(texels: TexelSet, spacing: int) -> list:

@@ -411,10 +411,11 @@ def _dilate(img, filled, margin):
         filled[:] = grown
 
 
-def dilate(image: np.ndarray, mask: np.ndarray, margin: int) -> np.ndarray:
+def dilate(image: np.ndarray, mask: np.ndarray, margin: int, in_place: bool = False) -> np.ndarray:
     """Grow covered texels outwards by `margin` pixels: each empty texel next to covered ones
-    takes their mean, ring by ring, as Blender's bake margin (extend) does."""
-    img = image.astype(np.float32, copy=True)
+    takes their mean, ring by ring, as Blender's bake margin (extend) does. `in_place`: grow
+    `image` itself when it is float32 (no copy), else a copy."""
+    img = image if in_place and image.dtype == np.float32 else image.astype(np.float32, copy=True)
     if img.shape[0] and img.shape[1] and not mask.all():
         _dilate(img, np.array(mask, np.bool_), int(margin))
     return img

@@ -502,14 +502,18 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
                 result_images[lm.name] = denoised(img)
             else:
                 # E/π, lightmap by lightmap: no float32 copy of the whole bake's direct light.
+                # In place where it can (img becomes the indirect part): at 2048² each image is 50 MB.
                 first, _ = texels_mod.to_image(direct[lm.texels] / np.float32(np.pi), lm, pixel)
-                rest = np.maximum(img - first, 0.0)
+                rest = np.maximum(np.subtract(img, first, out=img), 0.0, out=img)
+                img = None
                 if sharp is not None:
                     kept, _ = texels_mod.to_image(sharp[lm.texels] / np.float32(np.pi), lm, pixel)
                     first = np.maximum(first - kept, 0.0, out=first)  # what the soft emitters gave
                     kept = texels_mod.dilate(kept, mask, settings.margin)
                 if sharp is not None and lm.width * lm.height >= ONE_PASS_FROM:  # soft direct + indirect: one OIDN run
-                    out = denoised(np.add(rest, first, out=rest))
+                    rest += first
+                    first = None
+                    out = denoised(rest)
                 else:
                     out = denoised(rest)
                     out += denoised(first)
