@@ -141,6 +141,22 @@ OPTIONS = (
     Option("seed", int, 0, "Seed", "Random seed: the same seed gives the same lightmaps", minimum=0),
     Option("resolution", int, 128, "Resolution", "Lightmap width and height in pixels",
            minimum=1, maximum=MAX_RESOLUTION, soft_maximum=4096),
+    Option("lightmaps", str, "object", "Lightmaps", "One lightmap per object, or every object's charts packed "
+           "into shared atlases at one texel density (lightmap/atlas.py)",
+           choices=(("object", "Per Object", "One lightmap per object, of its own resolution"),
+                    ("atlas", "Atlases", "The charts of all baked objects packed into a few atlases at one texel "
+                     "density: atlas_0.<estimator>.exr, …"))),
+    Option("texel_density", float, 32.0, "Texels per Metre", "Lightmap texels per metre of surface: of every "
+           "object in an atlas (times the object's own Density Scale), or of each object's own lightmap when "
+           "sizing by density", minimum=0.01, soft_maximum=1024.0, metavar="TEXELS"),
+    Option("atlas_size", int, 1024, "Atlas Size", "Width and height of each atlas in pixels; more atlases are "
+           "added as needed", minimum=16, maximum=MAX_RESOLUTION, soft_maximum=8192),
+    Option("atlas_padding", int, 2, "Atlas Padding", "Empty texels between charts in an atlas (at least 2: no "
+           "texel is shared under bilinear filtering)", minimum=1, maximum=64, metavar="TEXELS"),
+    Option("atlas_charts", str, "keep", "Atlas Charts", "Which islands are packed into the atlases",
+           choices=(("keep", "Keep", "The islands of each object's lightmap UV layer (made by Lightmap Pack where "
+                     "it has none), scaled to the density and placed"),
+                    ("smart", "Smart UV", "New islands from Blender's Smart UV Project: fewer seams"))),
     Option("margin", int, 16, "Margin", "Pixels of dilation around the UV charts, against seams under filtering",
            minimum=0, maximum=MAX_MARGIN),
     Option("threads", int, 0, "Threads", "Threads for tracing and estimation (0: all cores)", minimum=0,

@@ -123,6 +123,7 @@ class BakeObject:
     triangle_count: int
     resolution: int = 0
     bake: bool = True
+    image: str = ""  # the atlas its charts lie in (lightmap/atlas.py), shared with others; "": its own lightmap
 
     @property
     def triangles(self) -> slice:

@@ -69,8 +69,9 @@ def export(context, objects, log, created=None):
     prefs = preferences(context)
     budget = memory.geometry_budget(prefs.memory_budget if prefs is not None else 0)
     scene = blender.export_scene(context.scene, context.evaluated_depsgraph_get(), [o.name for o in objects],
-                                       uv_layers(objects), sizes, log, created, max_bytes=budget or None)
-    if s.resolution_mode == "DENSITY":
+                                       uv_layers(objects), sizes, log, created, max_bytes=budget or None,
+                                       atlas=bake_settings(context))
+    if s.resolution_mode == "DENSITY" and s.lightmaps != "atlas":
         for obj in scene.objects:
             if obj.bake and not context.scene.objects[obj.name].detp_bake.resolution:
                 sl = obj.triangles

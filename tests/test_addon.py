@@ -102,8 +102,9 @@ def test_every_panel_draws_existing_properties_and_operators(addon, cornell, bpy
     s = cornell.detp_bake
     seen = set()
     for estimator in estimators.names():  # the default (texel_histogram) and every other one
-        for mode in ("FIXED", "DENSITY"):
+        for lightmaps, mode in (("object", "FIXED"), ("object", "DENSITY"), ("atlas", "FIXED")):
             s.estimator, s.resolution_mode, s.radius_mode = estimator, mode, "WORLD" if mode == "DENSITY" else "TEXELS"
+            s.lightmaps = lightmaps
             s.last_report = "" if estimator == "disc_index" else json.dumps(
                 {"estimator": estimator, "objects": 7, "photons": 10, "segments": 20,
                  "seconds": {"export": 0.1, "trace": 1.0, "estimate": 0.5, "write": 0.1},
@@ -117,7 +118,7 @@ def test_every_panel_draws_existing_properties_and_operators(addon, cornell, bpy
                 seen |= {entry[1] for entry in log}
     assert {"detp_bake.bake", "detp_bake.apply", "detp_bake.revert", "detp_bake.unwrap", "detp_bake.compare",
             "detp_bake.compare_clear", "detp_bake.open_image", "photons", "radius_texels", "radius", "k", "q",
-            "kernel", "hybrid_moving", "texel_density", "uv_layer", "include"} <= seen
+            "kernel", "hybrid_moving", "texel_density", "uv_layer", "include", "density_scale"} <= seen
     # Every bake setting of options.py but the machine's memory budget (a preference) is on a panel.
     from detp_bake import options
     assert {o.name for o in options.OPTIONS} - seen == {"memory_budget_mb"}

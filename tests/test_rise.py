@@ -19,7 +19,7 @@ def test_pieces_are_the_welded_components():
     b = grid(1.0, 1.0, 2, z=0.005)[0]
     both = np.concatenate([a, b])
     scene = make_scene([("Both", (both, np.zeros_like(both), np.zeros(both.shape[:2] + (2,))), 0.5, True)], LAMP)
-    one_lightmap = SimpleNamespace(lightmaps=[SimpleNamespace(object_index=0)])  # all welded_pieces reads
+    one_lightmap = SimpleNamespace(lightmaps=[SimpleNamespace(members=(0,))])  # all welded_pieces reads
     label = welded_pieces(one_lightmap, scene)[0][0]
     assert len(set(label[:len(a)])) == 1 and len(set(label[len(a):])) == 1
     assert label[0] != label[-1]

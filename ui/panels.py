@@ -128,8 +128,15 @@ class DETPBAKE_PT_lightmaps(_Panel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         s = context.scene.detp_bake
-        layout.prop(s, "resolution_mode")
-        layout.prop(s, "resolution" if s.resolution_mode == "FIXED" else "texel_density")
+        layout.prop(s, "lightmaps")
+        if s.lightmaps == "atlas":
+            layout.prop(s, "texel_density")
+            layout.prop(s, "atlas_size")
+            layout.prop(s, "atlas_padding")
+            layout.prop(s, "atlas_charts")
+        else:
+            layout.prop(s, "resolution_mode")
+            layout.prop(s, "resolution" if s.resolution_mode == "FIXED" else "texel_density")
         layout.prop(s, "margin")
         layout.prop(s, "output_directory")
         layout.prop(s, "formats")
@@ -163,7 +170,7 @@ class DETPBAKE_PT_object(_Panel, bpy.types.Panel):
         layout.use_property_split = True
         o = obj.detp_bake
         layout.prop(o, "include")
-        layout.prop(o, "resolution")
+        layout.prop(o, "density_scale" if context.scene.detp_bake.lightmaps == "atlas" else "resolution")
         layout.prop(o, "uv_layer")
         if context.scene.detp_bake.use_frame_range:
             layout.prop(o, "motion")

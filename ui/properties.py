@@ -56,8 +56,11 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
                                          ("DENSITY", "Texel Density", "Lightmap size from each object's area")],
                                   description="How lightmap sizes are chosen")
     resolution: _option("resolution", soft_min=16)
-    texel_density: FloatProperty(name="Texels per Metre", default=32.0, min=0.01, soft_max=1024.0,
-                                 description="Lightmap texels per metre of surface, when sizing by density")
+    texel_density: _option("texel_density")
+    lightmaps: _option("lightmaps")
+    atlas_size: _option("atlas_size")
+    atlas_padding: _option("atlas_padding")
+    atlas_charts: _option("atlas_charts")
     margin: _option("margin")
     output_directory: StringProperty(name="Output", default="//lightmaps/", subtype="DIR_PATH",
                                      description="Folder for the lightmap files (// is the .blend's folder)")
@@ -96,6 +99,8 @@ class DETPBakeObjectSettings(bpy.types.PropertyGroup):
     include: BoolProperty(name="Include", default=True, description="Bake a lightmap for this object")
     resolution: IntProperty(name="Resolution Override", default=0, min=0, max=options.MAX_RESOLUTION,
                             description="This object's lightmap size (0: use the scene setting)")
+    density_scale: FloatProperty(name="Density Scale", default=1.0, min=0.01, soft_max=16.0,
+                                 description="Atlases: this object's texels per metre, times the scene's")
     uv_layer: StringProperty(name="Lightmap UV", default=options.UV_LAYER,
                              description="UV layer that holds this object's lightmap charts")
     motion: EnumProperty(name="Motion", default="AUTO",

@@ -13,6 +13,7 @@ from .common import DEFAULT_UV, uses_nodes
 from .evaluation import Collector, flatten, holdout, instancers, render_evaluation, rendered_names
 from .materials import Surface, read_surface
 from .world import export_world
+from .atlas import ATLAS_UV, pack as atlas_pack
 from .uv import ensure_lightmap_uv
 
 
@@ -87,7 +88,7 @@ def _targets(bl_scene, view_layer, objects, log) -> list:
 
 def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = None,
                  uv_layer=None, resolution=0, log: Callable[[str], None] = print,
-                 created: Optional[list] = None, max_bytes: Optional[int] = None) -> Scene:
+                 created: Optional[list] = None, max_bytes: Optional[int] = None, atlas=None) -> Scene:
     """The scene as F12 renders it (`render_evaluation`): every rendered mesh, curve, surface, text
     and metaball, and every instance of one, is geometry in world space; `objects` (default: every
     rendered mesh object) get lightmaps, and must be real mesh objects. `depsgraph` only names the
@@ -97,7 +98,9 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
     named layer must exist. Objects with no name given use DEFAULT_UV, created by Lightmap Pack
     where missing (said through `log`, and listed in `created` as (object, layer) so a cancelled
     bake can remove it again). `resolution` is one size for all or {object name: size}.
-    `max_bytes` limits the flattened geometry (BakeError naming the biggest contributors)."""
+    `max_bytes` limits the flattened geometry (BakeError naming the biggest contributors). `atlas`:
+    the BakeSettings of a bake into atlases (lightmaps 'atlas'): the objects' islands are packed
+    (blender/atlas.py) and baked through the atlas UV layer, at the atlas size."""
     view_layer = depsgraph.view_layer if depsgraph is not None else bpy.context.view_layer
     targets = _targets(bl_scene, view_layer, objects, log)
     if not targets:
@@ -113,6 +116,11 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
             log(f"object '{obj.name}': created UV layer '{layers[obj.name]}' with Lightmap Pack")
             if created is not None:
                 created.append((obj.name, layers[obj.name]))
+    in_atlas = {}
+    if atlas is not None and atlas.lightmaps == "atlas":
+        in_atlas = atlas_pack(bl_scene, targets, layers, atlas, log, created)
+        layers = {name: ATLAS_UV for name in layers}
+        resolution = {name: side for name, (_, side) in in_atlas.items()}
 
     collector = Collector(layers, log, material_surface)
     if depsgraph is not None and depsgraph.mode == "RENDER":
@@ -129,6 +137,8 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
     (pos, nrm, uvs, alb, emi), objs, stats, surfaces = flatten(collector, resolution, max_bytes,
                                                                 strict=objects is not None)
     world, world_map = export_world(bl_scene.world, log)
+    for obj in objs:
+        obj.image = in_atlas[obj.name][0] if obj.name in in_atlas else ""
     scene = Scene(positions=pos, normals=nrm, uvs=uvs, albedo=alb, emission=emi, objects=objs,
                   lights=collector.lights, world=world, default_bounces=scene_bounces(bl_scene),
                   world_map=world_map, **surfaces)

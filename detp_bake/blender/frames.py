@@ -9,7 +9,7 @@ from .export import export_scene
 
 
 def frame_exporter(bl_scene, objects=None, uv_layer=None, resolution=0, log: Callable[[str], None] = print,
-                   created: Optional[list] = None, max_bytes: Optional[int] = None):
+                   created: Optional[list] = None, max_bytes: Optional[int] = None, atlas=None):
     """`scene_at(frame)`: set the frame (animation, drivers, modifiers, simulations as Blender
     evaluates them) and export it (export.export_scene, same arguments). Each message of the
     exporter is said once for the whole range, not once per frame."""
@@ -22,7 +22,7 @@ def frame_exporter(bl_scene, objects=None, uv_layer=None, resolution=0, log: Cal
 
     def scene_at(frame: int):
         bl_scene.frame_set(int(frame))
-        return export_scene(bl_scene, None, objects, uv_layer, resolution, once, created, max_bytes)
+        return export_scene(bl_scene, None, objects, uv_layer, resolution, once, created, max_bytes, atlas)
 
     return scene_at
 

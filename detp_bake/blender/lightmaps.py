@@ -8,6 +8,7 @@ from typing import Optional
 import bpy
 
 from ..errors import BakeError
+from .atlas import ATLAS_UV, lightmap_of
 from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY, uses_nodes
 
 
@@ -195,18 +196,22 @@ def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional
     `copy_materials` gives each object its own material copies even when nobody shares them.
     `frames` (first, last): `files` are the first frame's of a range baked at every frame, shown as
     image sequences that follow the timeline."""
-    targets = {}
-    for name in files:
+    targets, lightmap = {}, lightmap_of(bl_scene, files)  # an atlas goes to each of its objects
+    for name in lightmap:
         obj = (objects or {}).get(name) or bl_scene.objects.get(name)
         if obj is not None:
             targets[name] = obj
     for name, obj in targets.items():
-        exr = [p for p in files[name] if p.endswith(".exr")]
+        image_name, paths = lightmap[name]
+        exr = [p for p in paths if p.endswith(".exr")]
         if not exr:
             raise BakeError("applying lightmaps needs the EXR format in 'formats'")
         layer = uv_layer.get(name) if isinstance(uv_layer, dict) else uv_layer
+        if image_name != name:  # an atlas: its objects' charts lie in the atlas UV layer
+            layer = ATLAS_UV
         revert(obj)  # a new bake replaces the last one
-        image = load_image(exr[0], f"{obj.name}.{estimator}", sequence=frames is not None)
+        image = load_image(exr[0], f"{obj.name if image_name == name else image_name}.{estimator}",
+                           sequence=frames is not None)
         shared = copy_materials or bool(shared_materials(obj, list(targets.values())))
         apply_lightmap(obj, image, layer or DEFAULT_UV, shared, frames)
     return list(targets.values())

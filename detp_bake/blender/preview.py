@@ -13,6 +13,7 @@ import json
 import bpy
 import numpy as np
 
+from .atlas import ATLAS_UV, members as atlas_members
 from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY
 from .lightmaps import apply_lightmap, revert, shared_materials
 
@@ -30,7 +31,7 @@ class LivePreview:
         self.swapped: list = []  # (material name, node name, image name it showed)
         self.updates = 0
 
-    def _image(self, name: str, shape) -> "bpy.types.Image":
+    def _image(self, name: str, shape, layer=None) -> "bpy.types.Image":
         h, w = shape[:2]
         img = self.images.get(name)
         if img is not None and tuple(img.size) == (w, h):
@@ -43,7 +44,7 @@ class LivePreview:
         if REVERT_KEY in obj:
             self._swap(obj, img)
         else:
-            layer = self.uv_layer.get(name) if isinstance(self.uv_layer, dict) else self.uv_layer
+            layer = layer or (self.uv_layer.get(name) if isinstance(self.uv_layer, dict) else self.uv_layer)
             shared = bool(shared_materials(obj, [self.scene.objects[n] for n in self.names
                                                  if n in self.scene.objects]))
             apply_lightmap(obj, img, layer or DEFAULT_UV, shared)
@@ -62,15 +63,20 @@ class LivePreview:
                     node.image = img
 
     def update(self, images: dict) -> None:
-        """Write a Preview event's images ({object: (H, W, 3) E/π, row 0 at the bottom}) and redraw."""
-        for name, picture in images.items():
-            if name not in self.names:
-                continue
-            img = self._image(name, picture.shape)
-            rgba = np.ones(picture.shape[:2] + (4,), np.float32)
-            rgba[..., :3] = picture
-            img.pixels.foreach_set(rgba.ravel())
-            img.update()
+        """Write a Preview event's images ({lightmap: (H, W, 3) E/π, row 0 at the bottom}) and
+        redraw. An atlas's image is written once, into an image of each of its objects."""
+        atlases = atlas_members(self.scene)
+        for lightmap, picture in images.items():
+            rgba = None
+            for name in atlases.get(lightmap, [lightmap]):
+                if name not in self.names:
+                    continue
+                img = self._image(name, picture.shape, ATLAS_UV if lightmap in atlases else None)
+                if rgba is None:
+                    rgba = np.ones(picture.shape[:2] + (4,), np.float32)
+                    rgba[..., :3] = picture
+                img.pixels.foreach_set(rgba.ravel())
+                img.update()
         self.updates += 1
         if not bpy.app.background:
             for window in bpy.context.window_manager.windows:

@@ -38,7 +38,24 @@ def build_parser(prog: str = "python -m detp_bake", with_scene_path: bool = True
                                              "(default: %s)" % " ".join(compare_defaults()))
     for p in (b, c):
         _bake_arguments(p, with_scene_path)
+    b.add_argument("--gltf", default=None, metavar="OUT.glb",
+                   help="after the bake, also write the scene as a .glb with its lightmaps (docs/gltf.md); the "
+                        "scene and the .blend are left as they are")
+    _export_arguments(sub.add_parser("export-gltf", help="write a baked scene as a .glb with its lightmaps "
+                                     "(MOZ_lightmap, RGBE)"), with_scene_path)
     return parser
+
+
+def _export_arguments(e, with_scene_path):
+    if with_scene_path:
+        e.add_argument("scene", help="the baked .blend file")
+    e.add_argument("--lightmaps", required=True, metavar="DIR", help="the bake's output folder (its report.json)")
+    e.add_argument("--out", required=True, metavar="OUT.glb", help="the .glb file to write")
+    e.add_argument("--estimator", default=None,
+                   help="whose lightmaps, when DIR holds a comparison (default: the one the report holds)")
+    e.add_argument("--uv-layer", default=None,
+                   help=f"the lightmap UV layer (default '{options.UV_LAYER}'), written as TEXCOORD_1")
+    e.add_argument("--json", action="store_true", help="print a JSON summary on stdout instead of the file")
 
 
 def _bake_arguments(b, with_scene_path):
@@ -122,7 +139,8 @@ def _open_scene(args, settings, bl_scene, warn=output.log):
     t0 = time.perf_counter()
     created = []
     scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
-                                 created, max_bytes=geometry_budget(settings.memory_budget_mb) or None)
+                                 created, max_bytes=geometry_budget(settings.memory_budget_mb) or None,
+                                 atlas=settings)
     _warn_created(args, created, warn)
     _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
          f"baking {sum(o.bake for o in scene.objects)} objects")
@@ -245,6 +263,8 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
     `cancel()` true stops it before anything is written. Returns the summary `main` prints."""
     warn = output.Warnings()
     settings = settings_from_args(args)
+    if args.gltf:
+        _check_gltf(args, settings)
     if args.frames is not None or args.moving or args.static:
         return run_frames(args, settings, bl_scene, cancel, warn)
     blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene, warn)
@@ -268,12 +288,54 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
         saved = Path(args.save).resolve()
         blender.save_blend(saved, files)
         _log(f"saved {saved}")
+    gltf = _export_after_bake(args, bl_scene, report.parent, settings.estimator) if args.gltf else []
     return {"command": "bake", "files": files, "report": str(report), "saved": str(saved) if saved else None,
+            "extra": gltf,
             "estimator": settings.estimator, "photons": result.stats.photons if result is not None else 0,
             "stopped_by": result.stopped_by if result is not None else "reused",
             "reused": list(done.reused),
             "noise": {n: round(100.0 * v, 3) for n, v in (result.noise.items() if result is not None else ())},
             "warnings": list(result.warnings) if result is not None else list(warn)}
+
+
+def _check_gltf(args, settings) -> None:
+    """--gltf is checked with the other inputs, before any work."""
+    if args.frames is not None or args.moving or args.static:
+        raise BakeError("--gltf exports one bake, not a frame range")
+    if "exr" not in settings.formats:
+        raise BakeError("--gltf needs the exr format in --format (the .glb's lightmaps are made from it)")
+    if Path(args.gltf).suffix.lower() != ".glb":
+        raise BakeError(f"--gltf '{args.gltf}': give the .glb file to write")
+    images.check_writable_dir(Path(args.gltf).resolve().parent)
+
+
+def _export_after_bake(args, bl_scene, out_dir, estimator) -> list:
+    """--gltf: the scene in memory with this bake's lightmaps, as a .glb (blender/gltf.py)."""
+    from ..blender.gltf import export_gltf
+    done = export_gltf(bl_scene, out_dir, args.gltf, estimator, args.uv_layer, _log)
+    return [done["gltf"]]
+
+
+def run_export_gltf(args, bl_scene=None, cancel=None) -> dict:
+    """`export-gltf BAKED.blend --lightmaps DIR --out scene.glb`: every input is checked before
+    the .blend is opened (blender/gltf.py checks the rest before it changes anything)."""
+    if Path(args.out).suffix.lower() != ".glb":
+        raise BakeError(f"--out '{args.out}': give the .glb file to write")
+    images.check_writable_dir(Path(args.out).resolve().parent)
+    if not (Path(args.lightmaps) / "report.json").is_file():
+        raise BakeError(f"no report.json in '{args.lightmaps}': give the output folder of a bake (--lightmaps)")
+    try:
+        from ..blender import files as blend_files, gltf
+    except ImportError as exc:
+        if exc.name != "bpy":
+            raise
+        raise BakeError("the 'bpy' module is not installed: run inside Blender or install the bpy wheel") from None
+    gltf.lightmap_files(args.lightmaps, args.estimator)  # a bad report is named before the scene is opened
+    if bl_scene is None:
+        bl_scene = blend_files.open_blend(Path(args.scene))
+    _check_cancel(cancel)
+    done = gltf.export_gltf(bl_scene, args.lightmaps, args.out, args.estimator, args.uv_layer, _log)
+    return {"command": "export-gltf", **done}
 
 
 def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> dict:
@@ -286,7 +348,7 @@ def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> d
     blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene, warn)
     created = []
     scene_at = blender.frame_exporter(bl_scene, args.objects, args.uv_layer, settings.resolution, _log, created,
-                                      max_bytes=geometry_budget(settings.memory_budget_mb) or None)
+                                      max_bytes=geometry_budget(settings.memory_budget_mb) or None, atlas=settings)
     # The same job engine as every bake (one at a time, events, one progress bar over the range);
     # each frame is exported here, on the main thread, when the worker asks for it.
     main = job_mod.MainThread()
@@ -322,7 +384,7 @@ def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> d
 def _cluster(args):
     """The Dask cluster to trace on (--scheduler, --workers), connected once the settings are
     checked and before the scene is opened; without either, a bake runs here and imports no Dask."""
-    if not (args.scheduler or args.workers):
+    if not (getattr(args, "scheduler", "") or getattr(args, "workers", 0)):  # export-gltf has neither
         return contextlib.nullcontext()
     if args.scheduler and args.workers:
         raise BakeError("--scheduler and --workers: choose one (a cluster of your own, or workers on this machine)")
@@ -342,7 +404,7 @@ def main(argv: Optional[Sequence[str]] = None, bl_scene=None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help or --version (0), or a bad option (2) that argparse has named
         return int(exc.code or 0)
-    run = {"bake": run_bake, "compare": run_compare}[args.command]
+    run = {"bake": run_bake, "compare": run_compare, "export-gltf": run_export_gltf}[args.command]
     with interrupt.cancel_on_signals() as cancel:
         try:
             with output.quiet_stdout():  # Blender's own prints go to stderr
@@ -354,5 +416,8 @@ def main(argv: Optional[Sequence[str]] = None, bl_scene=None) -> int:
         except (BakeCancelled, KeyboardInterrupt):
             print("detp_bake: cancelled: nothing written", file=sys.stderr, flush=True)
             return interrupt.EXIT_CODE
-    output.written(summary, args.json)
+    if args.command == "export-gltf" and not args.json:
+        print(summary["gltf"], flush=True)  # the one file written
+    else:
+        output.written(summary, args.json)
     return interrupt.EXIT_CODE if summary.get("cancelled") else 0

@@ -29,7 +29,7 @@ from .discs import Discs, make_discs
 from ..morton import morton_order
 from .sphere_cache import STREAM_SEGMENTS, SphereCache
 from ..errors import BakeError
-from ..lightmap.texels import select
+from ..lightmap.texels import of_objects, select
 
 MOVING = {"sphere_cache": SphereCache, "disc_index": DiscIndex}
 BOX_DISCS = 4096  # discs per box of the segment filter, at most
@@ -120,9 +120,7 @@ class Hybrid(Estimator):
         t0 = time.perf_counter()
         state = self.context.frames
         moving = state.moving if state is not None else frozenset()
-        static = np.zeros(len(texels), bool)
-        for lm in texels.lightmaps:
-            static[lm.texels] = lm.name not in moving
+        static = ~of_objects(texels, moving, self.context.scene)
         clearance, rise, extent = self.context.clearance, self.context.rise, self.context.extent
         scene_radius, expected = self.context.scene_radius, self.context.expected_segments
 

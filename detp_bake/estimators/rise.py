@@ -17,7 +17,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from ..lightmap.texels import TexelSet
+from ..lightmap.texels import TexelSet, lightmap_triangles
 
 SMALL_PIECE = 64  # vertices: a piece this small is measured from its vertices when texels are too few
 
@@ -106,7 +106,7 @@ def _rise(position, normal, radius, piece, cell):
 def welded_pieces(texels: TexelSet, scene) -> list:
     """Per lightmap, its object's mesh welded into pieces (`_welded`): computed once, read by both
     piece_extent and own_surface_rise."""
-    return [_welded(scene.positions[scene.objects[lm.object_index].triangles]) for lm in texels.lightmaps]
+    return [_welded(scene.positions[lightmap_triangles(scene, lm)]) for lm in texels.lightmaps]
 
 
 def piece_extent(texels: TexelSet, scene, welds=None) -> np.ndarray:
@@ -121,13 +121,13 @@ def piece_extent(texels: TexelSet, scene, welds=None) -> np.ndarray:
     welds = welded_pieces(texels, scene) if welds is None else welds
     for lm, (tri_piece, _, _) in zip(texels.lightmaps, welds):
         sl = lm.texels
-        obj = scene.objects[lm.object_index]
-        tris = scene.positions[obj.triangles]
+        own = lightmap_triangles(scene, lm)
+        tris = scene.positions[own]
         if len(tris) == 0:
             continue
         area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
         piece_area = np.bincount(tri_piece, weights=area.astype(np.float64))
-        out[sl] = np.sqrt(piece_area[tri_piece[texels.triangle[sl] - obj.first_triangle]] / np.pi)
+        out[sl] = np.sqrt(piece_area[tri_piece[np.searchsorted(own, texels.triangle[sl])]] / np.pi)
     return out
 
 
@@ -146,8 +146,7 @@ def own_surface_rise(texels: TexelSet, scene, radius: np.ndarray, welds=None) ->
         r = np.ascontiguousarray(radius[sl], np.float64)
         if r.size == 0 or not np.isfinite(r).all() or r.max() <= 0.0:
             continue
-        obj = scene.objects[lm.object_index]
-        piece = np.ascontiguousarray(tri_piece[texels.triangle[sl] - obj.first_triangle])
+        piece = np.ascontiguousarray(tri_piece[np.searchsorted(lightmap_triangles(scene, lm), texels.triangle[sl])])
         position = np.ascontiguousarray(texels.position[sl], np.float64)
         normal = np.ascontiguousarray(texels.normal[sl], np.float64)
         part = _rise(position, normal, r, piece, 2.0 * float(r.max()))

@@ -23,6 +23,7 @@ import numba
 import numpy as np
 
 from ..transport.textures import hit_uv, opacity_at, surfaces
+from ..lightmap.texels import lightmap_triangles
 from ..lightmap.validity import Cuts, on_side
 from . import Estimate, Estimator, register
 
@@ -143,7 +144,7 @@ class TexelHistogram(Estimator):
         for m, lm in enumerate(texels.lightmaps):
             if lm.width != lm.height:
                 raise ValueError("texel_histogram needs square lightmaps")
-            lm_of_tri[sc.objects[lm.object_index].triangles] = m
+            lm_of_tri[lightmap_triangles(sc, lm)] = m
             width[m], base[m] = lm.width, total
             total += lm.width * lm.height
         texel_of = np.full(total, -1, np.int32)

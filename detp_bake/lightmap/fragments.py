@@ -24,7 +24,7 @@ from scipy.spatial import cKDTree
 
 from .charts import chart_widths
 from ..bvh import discs_meet_triangles
-from .texels import TexelSet, geometric_normals
+from .texels import TexelSet, geometric_normals, lightmap_triangles
 from .validity import blocked_between
 
 FRAGMENT = 8.0  # texels: charts narrower than this (charts.py's width) are not denoised as an image
@@ -55,10 +55,9 @@ class Fragments:
 def fragment_texels(texels: TexelSet, lm, scene) -> np.ndarray:
     """Indices (within lightmap `lm`'s texels) of those whose triangle's chart is narrower than
     FRAGMENT texels."""
-    obj = scene.objects[lm.object_index]
-    sl = obj.triangles
+    sl = lightmap_triangles(scene, lm)
     chart, width = chart_widths(scene.uvs[sl], scene.positions[sl], lm.width)
-    own = texels.triangle[lm.texels] - obj.first_triangle
+    own = np.searchsorted(sl, texels.triangle[lm.texels])
     return np.flatnonzero(width[chart[own]] < FRAGMENT)
 
 

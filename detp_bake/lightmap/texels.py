@@ -11,7 +11,7 @@ bottom row, as in Blender's `Image.pixels`. Files are written top row first (see
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numba
 import numpy as np
@@ -27,9 +27,10 @@ HALF_DIAGONAL_SQ = 0.5  # (√2 / 2)², in texel units
 
 @dataclass
 class Lightmap:
-    """One object's image and its run of texels in the TexelSet."""
+    """One image and its run of texels in the TexelSet: one object's lightmap, or an atlas that
+    holds the charts of several (`objects`), each texel belonging to the object of its triangle."""
     name: str
-    object_index: int
+    object_index: int  # the (first) object whose charts it holds
     width: int
     height: int
     offset: int
@@ -46,9 +47,29 @@ class Lightmap:
     chart_width: float = 0.0
     border: float = 0.0
 
+    objects: tuple = ()  # an atlas: every object in it, in scene order (else empty: object_index alone)
+    # An atlas: {object name: {"texels": its covered texels, "rect": [x0, y0, x1, y1] the pixels its
+    # charts span (x1, y1 exclusive), "texel_size": metres per texel}} (report.json).
+    placement: dict = field(default_factory=dict)
+
     @property
     def texels(self) -> slice:
         return slice(self.offset, self.offset + self.count)
+
+    @property
+    def members(self) -> tuple:
+        """The indices of the objects whose charts the image holds."""
+        return tuple(self.objects) or (self.object_index,)
+
+
+def lightmap_triangles(scene: Scene, lm: Lightmap) -> np.ndarray:
+    """The scene's triangles whose charts lie in lightmap `lm`, ascending (objects are runs of
+    consecutive triangles in scene order): `np.searchsorted` of it turns a texel's triangle into
+    an index into per-triangle arrays of the lightmap."""
+    objs = [scene.objects[i] for i in lm.members]
+    if len(objs) == 1:
+        return np.arange(objs[0].first_triangle, objs[0].first_triangle + objs[0].triangle_count)
+    return np.concatenate([np.arange(o.first_triangle, o.first_triangle + o.triangle_count) for o in objs])
 
 
 @dataclass
@@ -252,20 +273,36 @@ def texel_sizes(scene: Scene, names, resolution: int) -> dict:
             for obj in scene.objects if obj.name in names}
 
 
+def images(scene: Scene) -> list[tuple[str, list[int]]]:
+    """[(image name, object indices)] of the objects with `bake` set, in scene order: an object
+    alone under its own name, or with the others that name the same atlas (BakeObject.image)."""
+    groups: dict = {}
+    for index, obj in enumerate(scene.objects):
+        if obj.bake:
+            groups.setdefault(obj.image or obj.name, []).append(index)
+    for name, members in groups.items():
+        sizes = {int(scene.objects[i].resolution) for i in members}
+        if len(sizes) > 1:
+            raise BakeError(f"atlas '{name}': its objects have different resolutions {sorted(sizes)}")
+    return list(groups.items())
+
+
 def rasterise(scene: Scene) -> TexelSet:
-    """Texels of every object with `bake` set, at its `resolution` (square lightmaps)."""
+    """Texels of every object with `bake` set, at its `resolution` (square lightmaps); the objects
+    of one atlas into one image, each texel taking the nearest triangle of any of them."""
     parts = []
     lightmaps: list[Lightmap] = []
     offset = 0
     world_area, uv_area = _areas(scene)
     uv = scene.uvs.astype(np.float64)
-    for index, obj in enumerate(scene.objects):
-        if not obj.bake:
-            continue
+    for name, members in images(scene):
+        index, obj = members[0], scene.objects[members[0]]
         res = int(obj.resolution)
         if res <= 0:
             raise BakeError(f"object '{obj.name}': lightmap resolution must be positive, got {res}")
-        sl = obj.triangles
+        lm = Lightmap(name, index, res, res, offset, 0, 0.0, objects=tuple(members) if obj.image else ())
+        sl = lightmap_triangles(scene, lm) if obj.image else obj.triangles
+        first = int(obj.first_triangle) if not obj.image else 0
         best_tri = np.full(res * res, -1, np.int32)
         best_d2 = np.full(res * res, np.inf)
         bary = np.zeros((res * res, 3))
@@ -275,19 +312,25 @@ def rasterise(scene: Scene) -> TexelSet:
                                    bary, cover, inside)
         pixel = np.flatnonzero(best_tri >= 0).astype(np.int32)
         if pixel.size == 0:
-            raise BakeError(f"object '{obj.name}': its lightmap UVs cover no texel at {res}x{res} "
-                            "(are the UVs all zero or outside 0..1?)")
+            raise BakeError(f"{'atlas' if obj.image else 'object'} '{name}': its lightmap UVs cover no texel at "
+                            f"{res}x{res} (are the UVs all zero or outside 0..1?)")
         pos = np.empty((len(pixel), 3))
         nrm = np.empty((len(pixel), 3))
-        _surface(pixel, best_tri, bary, scene.positions, scene.normals, obj.first_triangle, pos, nrm)
-        tri = best_tri[pixel] + np.int32(obj.first_triangle)
+        # In an atlas the rasterised triangles are the members' (`sl`, an index array): back to the scene's.
+        local = best_tri[pixel]
+        tri = (local + np.int32(first)) if not obj.image else sl[local].astype(np.int32)
+        _surface(pixel, best_tri if not obj.image else _global(best_tri, sl), bary, scene.positions, scene.normals,
+                 first, pos, nrm)
         del bary
         texel_size = _texel_size(world_area, uv_area, sl, res)
         held = int(np.count_nonzero(inside))
-        overlap = float(np.count_nonzero(inside > 1)) / held if held else 0.0
-        outside = max(0.0, 1.0 - within / total) if total > 0 else 0.0
-        stats = charts_mod.chart_stats(uv[sl], scene.positions[sl], res, pixel, best_tri[pixel])
-        lightmaps.append(Lightmap(obj.name, index, res, res, offset, len(pixel), texel_size, overlap, outside, *stats))
+        lm.overlap = float(np.count_nonzero(inside > 1)) / held if held else 0.0
+        lm.outside = max(0.0, 1.0 - within / total) if total > 0 else 0.0
+        lm.charts, lm.chart_width, lm.border = charts_mod.chart_stats(uv[sl], scene.positions[sl], res, pixel, local)
+        lm.count, lm.texel_size = len(pixel), texel_size
+        if obj.image:
+            lm.placement = _placement(scene, members, tri, pixel, res, world_area, uv_area)
+        lightmaps.append(lm)
         parts.append([pos, nrm, tri, pixel, cover[pixel].astype(np.float32), best_d2[pixel] <= 1e-9])
         offset += len(pixel)
     if not parts:
@@ -299,6 +342,38 @@ def rasterise(scene: Scene) -> TexelSet:
         for p in parts:
             p[f] = None
     return TexelSet(*cat, lightmaps=lightmaps)
+
+
+def of_objects(texels: TexelSet, names, scene: Scene | None = None) -> np.ndarray:
+    """Per texel, whether its object is one of `names`: by its triangle's object where an atlas may
+    hold several (`scene` given), else by its lightmap's name."""
+    names = set(names)
+    if scene is None:
+        return np.repeat([lm.name in names for lm in texels.lightmaps], [lm.count for lm in texels.lightmaps])
+    named = np.array([o.name in names for o in scene.objects] + [False])
+    return named[scene.object_index()[texels.triangle]]
+
+
+def _placement(scene: Scene, members, tri, pixel, res, world_area, uv_area) -> dict:
+    """Where each object of an atlas lies in it (Lightmap.placement)."""
+    out = {}
+    owner = np.searchsorted([scene.objects[i].first_triangle for i in members], tri, side="right") - 1
+    for k, i in enumerate(members):
+        obj = scene.objects[i]
+        mine = pixel[owner == k]
+        x, y = mine % res, mine // res
+        rect = [int(x.min()), int(y.min()), int(x.max()) + 1, int(y.max()) + 1] if mine.size else [0, 0, 0, 0]
+        out[obj.name] = {"texels": int(mine.size), "rect": rect,
+                         "texel_size": _texel_size(world_area, uv_area, obj.triangles, res)}
+    return out
+
+
+def _global(best_tri: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """An atlas's per-pixel nearest triangle, from its members' list to the scene's numbering."""
+    out = np.full_like(best_tri, -1)
+    hit = best_tri >= 0
+    out[hit] = triangles[best_tri[hit]]
+    return out
 
 
 def geometric_normals(scene: Scene, triangle: np.ndarray, towards: np.ndarray) -> np.ndarray:

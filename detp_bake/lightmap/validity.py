@@ -42,7 +42,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..bvh import discs_meet_triangles, faces_against
 from ..sampling import inline
-from .texels import TexelSet, geometric_normals, neighbour_pairs, pixel_steps
+from .texels import TexelSet, geometric_normals, lightmap_triangles, neighbour_pairs, pixel_steps
 
 DIRECTIONS = 8  # probe rays per texel, in opposite pairs
 LIFT = 0.02  # probe height above the surface, in texel sizes
@@ -258,7 +258,7 @@ def _shares(texels: TexelSet, scene, cuts: Cuts) -> np.ndarray:
     world_area = 0.5 * np.linalg.norm(np.cross(scene.positions[:, 1] - scene.positions[:, 0],
                                                scene.positions[:, 2] - scene.positions[:, 0]), axis=1)
     for lm in texels.lightmaps:
-        sl = scene.objects[lm.object_index].triangles
+        sl = lightmap_triangles(scene, lm)
         texel_of = np.full(lm.width * lm.height, -1, np.int64)
         texel_of[texels.pixel[lm.texels]] = np.arange(lm.offset, lm.offset + lm.count)
         _near_areas(np.ascontiguousarray(scene.uvs[sl], np.float64), np.ascontiguousarray(scene.positions[sl], np.float64),

@@ -119,6 +119,17 @@ def object_keys(scene: Scene, settings, names: Iterable[str], reach: float) -> d
         obj = scene.object_named(name)
         res = obj.resolution if obj.resolution > 0 else settings.resolution
         out[name] = digest([shared, name, scene.uvs[obj.triangles], np.array([res])])
+    # The objects of an atlas share one image, denoised and written together: one key for all of
+    # them, so that a change to any one rebakes the atlas.
+    atlases: dict = {}
+    for name in out:
+        image = scene.object_named(name).image
+        if image:
+            atlases.setdefault(image, []).append(name)
+    for image, members in atlases.items():
+        key = digest([image] + [out[n] for n in sorted(members)])
+        for n in members:
+            out[n] = key
     return out
 
 

@@ -55,20 +55,33 @@ class BakeResult:
     reused: dict = field(default_factory=dict)
     earlier: list = field(default_factory=list)
 
+    def _entries(self, lm) -> list:
+        """report.json's entries of lightmap `lm`: its object's, or one per object of an atlas
+        (`image` names the atlas, `rect` where the object's charts lie in it)."""
+        common = {"resolution": [lm.width, lm.height], "files": self.files.get(lm.name, []),
+                  "charts": {"count": lm.charts, "median_width": round(lm.chart_width, 2),
+                             "border": round(lm.border, 4)}}
+        if not lm.placement:
+            return [{"name": lm.name, "texels": lm.count, "texel_size": lm.texel_size, **common,
+                     **({"key": self.keys[lm.name], "reused": False} if lm.name in self.keys else {})}]
+        return [{"name": name, "image": lm.name, **place, **common,
+                 **({"key": self.keys[name], "reused": False} if name in self.keys else {})}
+                for name, place in lm.placement.items()]
+
     def report(self) -> dict:
         st = self.stats
+        atlases = [{"name": lm.name, "size": lm.width, "objects": list(lm.placement), "texels": lm.count,
+                    "fill": round(lm.count / float(lm.width * lm.height), 4)}
+                   for lm in self.texels.lightmaps if lm.placement]
         settings = asdict(self.settings)
         settings["formats"] = list(self.settings.formats)
         settings["bounces"] = self.bounces
         return {
             "version": __version__,
             "settings": settings,
-            "objects": [{"name": lm.name, "resolution": [lm.width, lm.height], "texels": lm.count,
-                         "texel_size": lm.texel_size, "files": self.files.get(lm.name, []),
-                         "charts": {"count": lm.charts, "median_width": round(lm.chart_width, 2),
-                                    "border": round(lm.border, 4)},
-                         **({"key": self.keys[lm.name], "reused": False} if lm.name in self.keys else {})}
-                        for lm in self.texels.lightmaps] + [{**entry, "reused": True} for entry in self.reused.values()],
+            "objects": [entry for lm in self.texels.lightmaps for entry in self._entries(lm)]
+            + [{**entry, "reused": True} for entry in self.reused.values()],
+            **({"atlases": atlases} if atlases else {}),
             **({"reused": list(self.reused)} if self.keys else {}),
             **({"earlier_objects": self.earlier} if self.earlier else {}),
             "photons": st.photons,

@@ -30,6 +30,13 @@ class BakeSettings:
     seed: int = default("seed")
     resolution: int = default("resolution")  # default per-object lightmap size (objects may override)
     margin: int = default("margin")  # dilation, pixels
+    # Atlases (lightmap/atlas.py): the Blender export packs the charts; the bake sees objects that
+    # share an image (BakeObject.image).
+    lightmaps: str = default("lightmaps")
+    texel_density: float = default("texel_density")
+    atlas_size: int = default("atlas_size")
+    atlas_padding: int = default("atlas_padding")
+    atlas_charts: str = default("atlas_charts")
     formats: tuple = ("exr",)
     half: bool = False
     threads: int = default("threads")  # 0: all cores

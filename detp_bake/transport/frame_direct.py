@@ -25,7 +25,7 @@ import numpy as np
 from . import direct as direct_mod
 from ..scene import AreaLight, PointLight, SpotLight, SunLight
 from ..lightmap.texel_area import spread_reach
-from ..lightmap.texels import select
+from ..lightmap.texels import of_objects, select
 
 
 @dataclass
@@ -86,9 +86,7 @@ def _near(pos, slack, light_at, light_r, light_dir, box_c, box_r, out):
 
 
 def _near_texels(state, scene, texels) -> np.ndarray:
-    moving = np.zeros(len(texels), bool)
-    for lm in texels.lightmaps:
-        moving[lm.texels] = lm.name in state.moving
+    moving = of_objects(texels, state.moving, scene)
     _, radius = scene.bounds()
     lights = _light_spheres(scene, 4.0 * radius)
     if lights is None or state.lights_change or state.moving_boxes is None:
