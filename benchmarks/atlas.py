@@ -59,10 +59,11 @@ def main() -> None:
     ap.add_argument("--density", type=float, default=24.0)
     ap.add_argument("--atlas-size", type=int, default=2048)
     ap.add_argument("--photons", type=int, default=500_000)
+    ap.add_argument("--charts", default="layout", choices=("layout", "islands", "smart"))
     ap.add_argument("--json", default=str(Path(__file__).resolve().parent / "results" / "atlas.json"))
     args = ap.parse_args()
     common = dict(photons=args.photons, seed=1, texel_density=args.density, atlas_size=args.atlas_size,
-                  atlas_charts="smart")
+                  atlas_charts=args.charts)
     rows = []
     print(f"{'scene':8} {'per-object px':>14} {'atlas px':>10} {'ratio':>6} {'fill':>6} {'atlases':>8} "
           f"{'s per-object':>12} {'s atlas':>8}")

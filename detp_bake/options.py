@@ -153,10 +153,13 @@ OPTIONS = (
            "added as needed", minimum=16, maximum=MAX_RESOLUTION, soft_maximum=8192),
     Option("atlas_padding", int, 2, "Atlas Padding", "Empty texels between charts in an atlas (at least 2: no "
            "texel is shared under bilinear filtering)", minimum=1, maximum=64, metavar="TEXELS"),
-    Option("atlas_charts", str, "keep", "Atlas Charts", "Which islands are packed into the atlases",
-           choices=(("keep", "Keep", "The islands of each object's lightmap UV layer (made by Lightmap Pack where "
-                     "it has none), scaled to the density and placed"),
-                    ("smart", "Smart UV", "New islands from Blender's Smart UV Project: fewer seams"))),
+    Option("atlas_charts", str, "layout", "Atlas Charts", "What is packed into the atlases",
+           choices=(("layout", "Object Layouts", "Each object's lightmap UV layer as it is (made by Lightmap Pack "
+                     "where it has none), as one block, scaled to the density and placed"),
+                    ("islands", "Islands", "The islands of each object's lightmap UV layer, each scaled to the "
+                     "density and placed on its own"),
+                    ("smart", "Smart UV", "New islands from Blender's Smart UV Project (fewer seams), placed on "
+                     "their own"))),
     Option("margin", int, 16, "Margin", "Pixels of dilation around the UV charts, against seams under filtering",
            minimum=0, maximum=MAX_MARGIN),
     Option("threads", int, 0, "Threads", "Threads for tracing and estimation (0: all cores)", minimum=0,

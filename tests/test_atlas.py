@@ -145,3 +145,30 @@ def test_cli_atlas_bake_applies_through_the_atlas_layer_and_rebakes_when_an_obje
     assert main(args, bl_scene=cornell) == 0
     report = json.loads((out / "report.json").read_text())
     assert not any(e["reused"] for e in report["objects"])
+
+
+def test_linked_duplicates_get_meshes_and_texels_of_their_own(cornell, bpy):
+    from detp_bake import blender
+    from detp_bake.run.bake import BakeSettings
+    from detp_bake.lightmap import texels as texels_mod
+    box = cornell.objects["ShortBox"]
+    twin = box.copy()  # a linked duplicate: the same mesh
+    twin.name = "ShortBoxTwin"
+    twin.location.x += 2.0
+    cornell.collection.objects.link(twin)
+    assert twin.data == box.data
+    said = []
+    settings = BakeSettings(lightmaps="atlas", texel_density=16.0, atlas_size=512)
+    scene = blender.export_scene(cornell, atlas=settings, log=said.append)
+    assert twin.data != box.data and "LightmapAtlas" in twin.data.uv_layers
+    assert any("ShortBoxTwin" in m and "mesh of its own" in m for m in said)
+    ts = texels_mod.rasterise(scene)
+    (lm,) = ts.lightmaps
+    owner = scene.object_index()[ts.triangle]
+    mine = {name: set(ts.pixel[owner == scene.objects.index(scene.object_named(name))].tolist())
+            for name in ("ShortBox", "ShortBoxTwin")}
+    assert len(mine["ShortBox"]) == len(mine["ShortBoxTwin"]) > 50
+    # Sharing UVs, the two would lie on the same texels: every texel of theirs under two triangles.
+    assert lm.overlap < 0.01
+    rects = [lm.placement[n]["rect"] for n in ("ShortBox", "ShortBoxTwin")]
+    assert rects[0] != rects[1]

@@ -114,7 +114,8 @@ def pack(bl_scene, objects, layers: dict, settings, log, created=None) -> dict:
         loops[obj.name] = loop
         scale = float(obj.detp_bake.density_scale) if hasattr(obj, "detp_bake") else 1.0
         meshes.append(atlas_mod.Mesh(obj.name, world, uv, scale))
-    packing = atlas_mod.pack(meshes, settings.texel_density, settings.atlas_size, settings.atlas_padding, keep=True)
+    packing = atlas_mod.pack(meshes, settings.texel_density, settings.atlas_size, settings.atlas_padding, keep=True,
+                             whole=settings.atlas_charts == "layout")
     for warning in packing.warnings:
         log(warning)
     for obj in objects:

@@ -82,17 +82,51 @@ def _weld(mesh: Mesh, keep: bool) -> tuple[np.ndarray, np.ndarray, Optional[np.n
             np.ascontiguousarray(index.reshape(-1, 3), np.uint32), uv)
 
 
-def _pack(meshes: list, density: float, size: int, padding: int, keep: bool) -> tuple[int, list]:
+def _block(mesh: Mesh) -> tuple[Mesh, np.ndarray]:
+    """A stand-in for `mesh` packed whole: a rectangle of the world size its UV layout's bounding
+    box has at the mesh's own metres per UV unit; and that box (u0, v0, u1, v1)."""
+    uv = np.asarray(mesh.uvs, np.float64)
+    lo, hi = uv.reshape(-1, 2).min(axis=0), uv.reshape(-1, 2).max(axis=0)
+    e = uv[:, 1:] - uv[:, :1]
+    uv_area = 0.5 * np.abs(e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0]).sum()
+    metres = np.sqrt(mesh.area() / uv_area) if uv_area > 0 else 0.0
+    w, h = (hi - lo) * metres
+    quad = np.array([[[0, 0, 0], [w, 0, 0], [w, h, 0]], [[0, 0, 0], [w, h, 0], [0, h, 0]]], np.float64)
+    box = np.array([[[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]]], [[lo[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]]])
+    return Mesh(mesh.name, quad, box, mesh.scale), np.r_[lo, hi]
+
+
+def _placed_block(mesh: Mesh, box: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """The mesh's UVs carried into its packed stand-in (`corners`, (2, 3, 2)): the affine map of its
+    bounding box onto the rectangle xatlas placed (and may have turned)."""
+    c0, c1, c3 = corners[0, 0].astype(np.float64), corners[0, 1].astype(np.float64), corners[1, 2].astype(np.float64)
+    uv = np.asarray(mesh.uvs, np.float64)
+    s = (uv[..., 0:1] - box[0]) / max(box[2] - box[0], 1e-12)
+    t = (uv[..., 1:2] - box[1]) / max(box[3] - box[1], 1e-12)
+    return (c0 + s * (c1 - c0) + t * (c3 - c0)).astype(np.float32)
+
+
+def _pack(meshes: list, density: float, size: int, padding: int, keep: bool, whole: bool = False) -> tuple[int, list]:
+    """(atlases xatlas needed, [(T, 3, 2) corner UVs per mesh]) of `meshes` packed together."""
+    if whole:
+        blocks = [_block(m) for m in meshes]
+        count, uvs = _pack_charts([b for b, _ in blocks], density, size, padding, True, brute=True)
+        return count, [_placed_block(m, box, c) for m, (_, box), c in zip(meshes, blocks, uvs)]
+    return _pack_charts(meshes, density, size, padding, keep)
+
+
+def _pack_charts(meshes: list, density: float, size: int, padding: int, keep: bool,
+                 brute: bool = False) -> tuple[int, list]:
     """One xatlas run over `meshes`: (atlases it needed, [(T, 3, 2) corner UVs per mesh]). First
     with the atlas's size left to xatlas (tightest), again at `size` when that is too big."""
-    count, side, uvs = _run(meshes, density, 0, padding, keep)
+    count, side, uvs = _run(meshes, density, 0, padding, keep, brute)
     if count == 1 and side <= size:
         return 1, [u * np.float32(side / size) for u in uvs]
-    count, _, uvs = _run(meshes, density, size, padding, keep)
+    count, _, uvs = _run(meshes, density, size, padding, keep, brute)
     return count, uvs
 
 
-def _run(meshes: list, density: float, size: int, padding: int, keep: bool) -> tuple[int, int, list]:
+def _run(meshes: list, density: float, size: int, padding: int, keep: bool, brute: bool = False) -> tuple[int, int, list]:
     import xatlas
 
     atlas = xatlas.Atlas()
@@ -106,6 +140,7 @@ def _run(meshes: list, density: float, size: int, padding: int, keep: bool) -> t
     pack.texels_per_unit = float(density)
     pack.padding = int(padding)
     pack.bilinear = True
+    pack.bruteForce = bool(brute)  # every position tried: slow per chart, worth it for a few whole layouts
     atlas.generate(charts, pack)
     out = []
     for i, mesh in enumerate(meshes):
@@ -150,8 +185,10 @@ def _bins(meshes: list, density: float, size: int) -> list:
     return bins
 
 
-def pack(meshes: list, density: float, size: int, padding: int = 2, keep: bool = False) -> Packing:
-    """Pack `meshes` (Mesh) into atlases of size × size texels at `density` texels per metre."""
+def pack(meshes: list, density: float, size: int, padding: int = 2, keep: bool = False,
+         whole: bool = False) -> Packing:
+    """Pack `meshes` (Mesh) into atlases of size × size texels at `density` texels per metre: their
+    own charts (keep: their UV islands, one by one; whole: each one's UV layout as one block)."""
     if not density > 0:
         raise BakeError(f"setting 'texel_density' must be positive, got {density}")
     names = [m.name for m in meshes]
@@ -164,7 +201,7 @@ def pack(meshes: list, density: float, size: int, padding: int = 2, keep: bool =
     queue = _bins(meshes, density, size)
     while queue:
         group = queue.pop(0)
-        count, uvs = _pack(group, density, size, padding, keep)
+        count, uvs = _pack(group, density, size, padding, keep, whole and all(m.uvs is not None for m in group))
         if count > 1 and len(group) > 1:  # hand the smallest on to the next atlas
             rest = group.pop()
             if queue:
