@@ -7,7 +7,7 @@ import pytest
 
 from detp_bake.errors import BakeError
 from detp_bake.lightmap import atlas, texels as texels_mod
-from detp_bake.scene import BakeObject, PointLight, Scene
+from detp_bake.scene import AreaLight, BakeObject, PointLight, Scene
 
 
 def box(size, at=(0.0, 0.0, 0.0)):
@@ -172,3 +172,40 @@ def test_linked_duplicates_get_meshes_and_texels_of_their_own(cornell, bpy):
     assert lm.overlap < 0.01
     rects = [lm.placement[n]["rect"] for n in ("ShortBox", "ShortBoxTwin")]
     assert rects[0] != rects[1]
+
+
+def _two_plates_in_one_atlas(gap_texels: float, res: int = 64):
+    """A plate under a square area light (its direct light is soft, so it is denoised) and a plate
+    facing away from it (it receives nothing at all), their charts side by side in one atlas
+    `gap_texels` apart."""
+    def plate(x0, facing_up):
+        p = np.array([[[x0, 0, 0], [x0 + 1, 0, 0], [x0 + 1, 1, 0]], [[x0, 0, 0], [x0 + 1, 1, 0], [x0, 1, 0]]], float)
+        return p if facing_up else p[:, [0, 2, 1]]
+    half = (0.5 - 0.5 * gap_texels / res)
+    uv_left = np.array([[[0.02, 0.02], [half, 0.02], [half, 0.98]], [[0.02, 0.02], [half, 0.98], [0.02, 0.98]]])
+    uv_right = uv_left + [0.5 + 0.5 * gap_texels / res - 0.02, 0.0]
+    lit, dark = plate(0.0, True), plate(3.0, False)
+    tris = np.concatenate([lit, dark])
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    objs = [BakeObject("Lit", 0, 2, res, True, image="atlas_0"), BakeObject("Dark", 2, 2, res, True, image="atlas_0")]
+    return Scene(positions=tris, normals=np.repeat(n[:, None], 3, axis=1),
+                 uvs=np.concatenate([uv_left, uv_right[:, [0, 2, 1]]]).astype(np.float32),
+                 albedo=np.zeros((4, 3)), emission=np.zeros((4, 3)), objects=objs,
+                 lights=[AreaLight("Panel", np.array([[1, 0, 0, 0.5], [0, 1, 0, 0.5], [0, 0, 1, 1.0], [0, 0, 0, 1.0]]),
+                                   "SQUARE", 0.5, 0.5, np.full(3, 100.0))], world=np.zeros(3))
+
+
+def test_denoising_an_atlas_keeps_one_objects_light_off_its_neighbour():
+    from detp_bake.lightmap import denoise
+    from detp_bake.run.bake import BakeSettings, compute
+    if not denoise.available():
+        pytest.skip("pyoidn is not installed")
+    r = compute(_two_plates_in_one_atlas(gap_texels=3), BakeSettings(photons=20_000, seed=1, margin=2))
+    (lm,) = r.texels.lightmaps
+    image, mask = r.images["atlas_0"], r.masks["atlas_0"]
+    owner = r.texels.triangle[lm.texels] >= 2  # the dark plate's texels
+    dark = np.zeros(mask.shape, bool)
+    dark.flat[r.texels.pixel[lm.texels][owner]] = True
+    lit_mean = image[mask & ~dark].mean()
+    assert lit_mean > 1.0 and image[dark].max() <= 1e-6 * lit_mean
