@@ -209,3 +209,24 @@ def test_denoising_an_atlas_keeps_one_objects_light_off_its_neighbour():
     dark.flat[r.texels.pixel[lm.texels][owner]] = True
     lit_mean = image[mask & ~dark].mean()
     assert lit_mean > 1.0 and image[dark].max() <= 1e-6 * lit_mean
+
+
+def test_compare_and_frame_ranges_work_on_atlases(cornell, bpy, tmp_path):
+    from detp_bake.cli import main
+    atlas_args = ["--lightmaps", "atlas", "--texel-density", "8", "--atlas-size", "128", "--photons", "30000"]
+    assert main(["compare", "--estimators", "texel_histogram", "disc_index", "--out", str(tmp_path / "cmp"),
+                 *atlas_args], bl_scene=cornell) == 0
+    for name in ("texel_histogram", "disc_index"):
+        assert (tmp_path / "cmp" / f"atlas_0.{name}.exr").exists()
+    report = json.loads((tmp_path / "cmp" / "report.json").read_text())
+    entries = report["estimators"]["disc_index"]["objects"]
+    assert {e["image"] for e in entries} == {"atlas_0"} and len(entries) == 7
+    # A range: the hybrid, with the tall box moving between the frames; one atlas per frame.
+    tall = cornell.objects["TallBox"]
+    tall.keyframe_insert("location", frame=1)
+    tall.location.x += 0.3
+    tall.keyframe_insert("location", frame=2)
+    assert main(["bake", "--frames", "1-2", "--estimator", "hybrid", "--out", str(tmp_path / "frames"),
+                 *atlas_args], bl_scene=cornell) == 0
+    assert sorted(p.name for p in (tmp_path / "frames").glob("atlas_0.hybrid.*.exr")) == \
+        ["atlas_0.hybrid.0001.exr", "atlas_0.hybrid.0002.exr"]
