@@ -176,15 +176,21 @@ class TexelHistogram(Estimator):
         self.seconds += time.perf_counter() - t0
 
     def take(self):
-        sums = {"irradiance": self.acc.copy(), "landings": self.landings, "counted": self.counted,
+        """Hands its sums over, not a copy (the bake adopts or adds them), and starts again from
+        zeros that take no memory until a photon lands: 24 bytes a texel less at 2048²."""
+        sums = {"irradiance": self.acc, "landings": self.landings, "counted": self.counted,
                 "seconds_query": self.seconds}
-        self.acc[:] = 0.0
+        self.acc = np.zeros(self.acc.shape)
         self.landings = self.counted = 0
         self.seconds = 0.0
         return sums
 
     def absorb(self, sums):
-        self.acc += sums["irradiance"]
+        given = sums["irradiance"]
+        if self.landings == 0 and given.flags.writeable and given.flags.owndata and given.shape == self.acc.shape:
+            self.acc = given  # nothing of its own yet: the sums become its own (0 + x is x)
+        else:
+            self.acc += given
         self.landings += sums["landings"]
         self.counted += sums["counted"]
         self.seconds += sums["seconds_query"]

@@ -188,7 +188,7 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
         else:
             w = None if weights is None or not weights[box][part].sum() > 0 else weights[box][part]
             result[box][part] = np.average(np.maximum(image[box][part], 0.0), axis=0, weights=w)
-    return dilate(result, mask, margin)
+    return dilate(result, mask, margin, in_place=True)
 
 
 def _touching(label: np.ndarray, count: int, reach: int) -> np.ndarray:
@@ -294,7 +294,8 @@ _device = None
 def _run_filter(color: np.ndarray, filter: str, quality: int, hdr: bool = False, clean_aux: bool = False,
                 albedo: Optional[np.ndarray] = None, normal: Optional[np.ndarray] = None) -> np.ndarray:
     """OIDN on one image: a filter of its own, its scratch bounded (MAX_MEMORY_MB) and released
-    on return. The CPU device is made once (bakes run one at a time: job.py)."""
+    on return. The CPU device is made once (bakes run one at a time: job.py). (OIDN could write
+    its output over `color`, with the same bytes, but its peak at 2048² stays the same.)"""
     global _device
     pyoidn = _pyoidn()
 

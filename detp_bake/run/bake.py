@@ -514,7 +514,7 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
                 if sharp is not None:
                     kept, _ = texels_mod.to_image(sharp[lm.texels] / np.float32(np.pi), lm, pixel)
                     first = np.maximum(first - kept, 0.0, out=first)  # what the soft emitters gave
-                    kept = texels_mod.dilate(kept, mask, settings.margin)
+                    kept = texels_mod.dilate(kept, mask, settings.margin, in_place=True)
                 if sharp is not None and lm.width * lm.height >= ONE_PASS_FROM:  # soft direct + indirect: one OIDN run
                     rest += first
                     first = None
