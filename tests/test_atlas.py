@@ -230,3 +230,31 @@ def test_compare_and_frame_ranges_work_on_atlases(cornell, bpy, tmp_path):
                  *atlas_args], bl_scene=cornell) == 0
     assert sorted(p.name for p in (tmp_path / "frames").glob("atlas_0.hybrid.*.exr")) == \
         ["atlas_0.hybrid.0001.exr", "atlas_0.hybrid.0002.exr"]
+
+
+def test_live_preview_and_revert_of_an_atlas_leave_the_materials_as_they_were(cornell, bpy, tmp_path):
+    from detp_bake import blender
+    from detp_bake.blender.preview import LivePreview
+    from detp_bake.run.bake import BakeSettings, compute
+    from detp_bake.run.results import preview_images
+    from detp_bake.run.writing import write
+    settings = BakeSettings(lightmaps="atlas", texel_density=8.0, atlas_size=128, photons=20_000, denoise=False)
+    scene = blender.export_scene(cornell, atlas=settings, log=lambda m: None)
+    r = compute(scene, settings)
+    names = [o.name for o in scene.objects]
+    before = {m.name: len(m.node_tree.nodes) for m in bpy.data.materials if m.node_tree}
+    preview = LivePreview(cornell, names, None)
+    preview.update(preview_images(r.texels, r.value, settings.margin))
+    for name in names:  # every object shows the atlas through the atlas layer
+        mat = cornell.objects[name].material_slots[0].material
+        assert any(n.type == "UVMAP" and n.uv_map == "LightmapAtlas" for n in mat.node_tree.nodes), name
+    preview.end()
+    assert {m.name: len(m.node_tree.nodes) for m in bpy.data.materials if m.node_tree} == before
+    assert not [i for i in bpy.data.images if i.name.startswith("detp_bake preview")]
+    write(r, tmp_path)
+    blender.apply_all(cornell, r.files, None, settings.estimator)
+    assert len([i for i in bpy.data.images if i.name.startswith("atlas_0")]) == 1  # loaded once
+    for name in names:
+        assert blender.revert(cornell.objects[name])
+    assert {m.name: len(m.node_tree.nodes) for m in bpy.data.materials if m.node_tree} == before
+    assert not [i for i in bpy.data.images if i.name.startswith("atlas_0")]
