@@ -33,6 +33,7 @@ class DETPBAKE_PT_main(_Panel, bpy.types.Panel):
         row.operator("detp_bake.apply", icon="MATERIAL")
         row.operator("detp_bake.revert", icon="LOOP_BACK")
         layout.operator("detp_bake.open_image", icon="IMAGE_DATA")
+        layout.operator("detp_bake.export_gltf", icon="EXPORT")
 
     @staticmethod
     def draw_running(layout, active):
