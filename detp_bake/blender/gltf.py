@@ -32,7 +32,9 @@ from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY
 EXTENSION = "MOZ_lightmap"
 ENCODING = "RGBE"
 TEMP = " (detp_bake glTF)"  # the temporary copies' names end with this
-LINEAR, CLAMP = 9729, 33071  # glTF sampler constants
+# glTF sampler constants. Nearest: blending RGBE bytes is not blending light (a GPU's bilinear filter
+# before decoding is off by 2-5 % on average, benchmarks/encoding.py); decode four texels, then blend.
+NEAREST, CLAMP = 9728, 33071
 
 
 def lightmap_files(out_dir, estimator: Optional[str] = None) -> tuple[str, dict]:
@@ -99,7 +101,8 @@ def export_gltf(bl_scene, out_dir, path, estimator: Optional[str] = None, uv_lay
     targets = _targets(bl_scene, files, uv_layer)
     if bpy.context.scene != bl_scene:
         raise BakeError(f"scene '{bl_scene.name}' is not the active scene: the glTF exporter writes the active one")
-    pngs = {exr: encoding.png_bytes(encoding.rgbe_encode(images.read_image(exr)))
+    # read_image gives row 0 at the bottom; a glTF image, as the EXR file, starts at the top (v = 1)
+    pngs = {exr: encoding.png_bytes(encoding.rgbe_encode(images.read_image(exr)[::-1]))
             for exr in dict.fromkeys(files.values())}
     state = _State(pngs)
     with _prepared(targets, files, state), _listed_as_addon():
@@ -170,7 +173,7 @@ def _extension(state: _State, exr: str):
         image = gltf2_io.Image(buffer_view=BinaryData(state.pngs[exr]), extensions=None, extras=None,
                                mime_type="image/png", name=stem, uri=None)
         if state.sampler is None:
-            state.sampler = gltf2_io.Sampler(extensions=None, extras=None, mag_filter=LINEAR, min_filter=LINEAR,
+            state.sampler = gltf2_io.Sampler(extensions=None, extras=None, mag_filter=NEAREST, min_filter=NEAREST,
                                              name=None, wrap_s=CLAMP, wrap_t=CLAMP)
         texture = state.textures[exr] = gltf2_io.Texture(extensions=None, extras=None, name=stem,
                                                          sampler=state.sampler, source=image)
