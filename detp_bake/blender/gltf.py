@@ -109,7 +109,7 @@ def export_gltf(bl_scene, out_dir, path, estimator: Optional[str] = None, uv_lay
         result = bpy.ops.export_scene.gltf(
             filepath=str(path), export_format="GLB", use_active_scene=True, use_renderable=True,
             export_apply=True, export_texcoords=True, export_normals=True, export_materials="EXPORT",
-            export_animations=False)
+            export_cameras=True, export_animations=False)
     missed = sorted(state.gltf_names[m] for m in state.materials if m not in state.done)
     if state.errors or missed or "FINISHED" not in result:
         raise BakeError(f"glTF export of '{path}' failed: " +

@@ -3,8 +3,8 @@
 A lightmap is linear and goes well past 1, so it is stored as RGBE, Radiance's shared exponent:
 alpha = E = e + 128 where 2^e bounds the texel's largest channel, rgb = each channel's mantissa
 c · 2^(8 − e) rounded to the nearest integer (Radiance truncates; rounding halves the worst error).
-Decoding is exactly c = byte · 2^(E − 136), and E = 0 is black. Each texel is then within 0.5/128
-(0.39 %) of its largest channel; negative light is stored as 0. The image must be read
+Decoding is exactly c = byte · 2^(E − 136), and E = 0 is black. Each channel is then within half a
+mantissa step, at most 1/255.5 (0.39 %) of the texel's largest channel; negative light is stored as 0. The image must be read
 unpremultiplied (alpha is an exponent, not a coverage).
 
 The other encodings here (RGBM, 16-bit linear, 8-bit sRGB under an exposure) exist to measure
