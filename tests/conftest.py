@@ -67,6 +67,7 @@ def pytest_runtest_logreport(report):
 
 
 def pytest_sessionfinish(session, exitstatus):
+    session.config.detp_bake_status = int(exitstatus)
     path = os.environ.get("DETP_BAKE_NEEDS_BLENDER")
     if path and not HAVE_BPY:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -98,3 +99,13 @@ def cornell(bpy):
 def empty_blend(bpy):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     return bpy.context.scene
+
+
+def pytest_unconfigure(config):
+    """Everything is reported by now: leave past bpy 4.5's exit handlers where they would hang
+    (detp_bake.cli.output.exit_hangs: a bake and Blender's glTF exporter in one process)."""
+    from detp_bake.cli.output import exit_hangs
+    if exit_hangs():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(getattr(config, "detp_bake_status", 1))

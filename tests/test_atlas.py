@@ -258,3 +258,24 @@ def test_live_preview_and_revert_of_an_atlas_leave_the_materials_as_they_were(co
         assert blender.revert(cornell.objects[name])
     assert {m.name: len(m.node_tree.nodes) for m in bpy.data.materials if m.node_tree} == before
     assert not [i for i in bpy.data.images if i.name.startswith("atlas_0")]
+
+
+def test_an_atlas_exports_to_gltf_through_the_atlas_layer_as_one_image(bpy, tmp_path):
+    from conftest import CORNELL
+    from test_gltf import _cli, _corners, _primitives, accessor, read_glb
+    out, blend, glb = tmp_path / "out", tmp_path / "baked.blend", tmp_path / "scene.glb"
+    _cli("bake", str(CORNELL), "--photons", "30000", "--lightmaps", "atlas", "--texel-density", "10",
+         "--out", str(out), "--save", str(blend), "--gltf", str(glb))  # a child: see test_gltf's `baked`
+    doc, binary = read_glb(glb)
+    assert len(doc["images"]) == 1
+    assert {m["extensions"]["MOZ_lightmap"]["index"] for m in doc["materials"]} == {0}
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    names = set()
+    for name, prim in _primitives(doc):
+        names.add(name)
+        attrs = prim["attributes"]
+        ours = np.hstack([accessor(doc, binary, attrs[k]) for k in ("POSITION", "TEXCOORD_0", "TEXCOORD_1")])
+        theirs = _corners(bpy, name, lightmap="LightmapAtlas")
+        gap = np.abs(ours[:, None, :] - theirs[None, :, :]).max(axis=2)
+        assert gap.min(axis=1).max() < 1e-5 and gap.min(axis=0).max() < 1e-5, name
+    assert len(names) == 7

@@ -138,7 +138,7 @@ def _primitives(doc):
                 yield node["name"], prim
 
 
-def _corners(bpy, obj_name):
+def _corners(bpy, obj_name, lightmap="Lightmap"):
     """Each corner of the Blender mesh: glTF position (y up), render UV and lightmap UV (v down)."""
     me = bpy.data.objects[obj_name].data
     n = len(me.loops)
@@ -149,11 +149,11 @@ def _corners(bpy, obj_name):
     pos = co.reshape(-1, 3)[vi][:, [0, 2, 1]] * [1, 1, -1]
     render = next(l for l in me.uv_layers if l.active_render)
     uvs = []
-    for layer in (render, me.uv_layers["Lightmap"]):
+    for layer in (render, me.uv_layers[lightmap]):
         uv = np.empty(2 * n, np.float32)
         layer.uv.foreach_get("vector", uv)
         uvs.append(uv.reshape(-1, 2) * [1, -1] + [0, 1])
-    assert render.name != "Lightmap"
+    assert render.name != lightmap
     return np.hstack([pos, *uvs])
 
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from ..errors import BakeError
 from ..lightmap import encoding, images
+from .atlas import ATLAS_UV, lightmap_of
 from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY
 
 EXTENSION = "MOZ_lightmap"
@@ -98,7 +99,12 @@ def export_gltf(bl_scene, out_dir, path, estimator: Optional[str] = None, uv_lay
         raise BakeError(f"'{path}': the glTF export writes a binary .glb file")
     images.check_writable_dir(path.parent)
     estimator, files = lightmap_files(out_dir, estimator)
-    targets = _targets(bl_scene, files, uv_layer)
+    # An object in an atlas shows it through the atlas UV layer (blender/atlas.py).
+    layers = dict(uv_layer) if isinstance(uv_layer, dict) else dict.fromkeys(files, uv_layer) if uv_layer else {}
+    for name, (image, _) in lightmap_of(bl_scene, {n: [p] for n, p in files.items()}).items():
+        if image != name:
+            layers[name] = ATLAS_UV
+    targets = _targets(bl_scene, files, layers or None)
     if bpy.context.scene != bl_scene:
         raise BakeError(f"scene '{bl_scene.name}' is not the active scene: the glTF exporter writes the active one")
     # read_image gives row 0 at the bottom; a glTF image, as the EXR file, starts at the top (v = 1)

@@ -79,3 +79,23 @@ def _paths(files):
         else:
             yield from value
 
+
+
+def exit_hangs() -> bool:
+    """Whether this process would hang in Blender's own exit handlers: the bpy 4.5 module, once
+    a bake's compiled kernels have run threads and Blender's glTF exporter has been loaded, waits
+    forever in a static destructor (its sound state's delayed-close thread is never woken; seen
+    with gdb, not with bpy 5.2). The callers leave with os._exit once everything is written."""
+    bpy = sys.modules.get("bpy")
+    return bpy is not None and tuple(bpy.app.version) < (5, 0, 0) and \
+        any(name.startswith("io_scene_gltf2.blender.exp") for name in sys.modules)
+
+
+def leave(code) -> None:
+    """Exit with `code` (None: 0), past Blender's exit handlers where they would hang."""
+    code = 0 if code is None else code
+    if exit_hangs() and isinstance(code, int):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
