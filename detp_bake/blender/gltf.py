@@ -18,7 +18,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import sys
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -28,6 +27,7 @@ import numpy as np
 from ..errors import BakeError
 from ..lightmap import encoding, images
 from .atlas import ATLAS_UV, lightmap_of
+from .lightmaps import unwire
 from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY
 
 EXTENSION = "MOZ_lightmap"
@@ -266,7 +266,7 @@ def _material_for(obj, index: int, exr: str, state: _State, made: list):
     temp.name = key[0] + TEMP
     made.append(temp)
     if temp.node_tree is not None and temp.node_tree.nodes.get(FRAME_NAME) is not None:
-        _without_frame(temp)
+        unwire(temp)
     state.materials[temp.name] = exr
     state.pairs[key] = temp.name
     state.gltf_names[temp.name] = key[0]
@@ -281,20 +281,6 @@ def _name_split_materials(state: _State) -> None:
     for (user, exr), temp in state.pairs.items():
         if len(images_of[user]) > 1:
             state.gltf_names[temp] = f"{user} ({os.path.basename(exr)[:-len('.exr')]})"
-
-
-def _without_frame(mat) -> None:
-    """Remove *Apply*'s node frame from a temporary copy, its output active again as before."""
-    nt = mat.node_tree
-    frame = nt.nodes[FRAME_NAME]
-    for node in [n for n in nt.nodes if n.parent == frame]:
-        nt.nodes.remove(node)
-    nt.nodes.remove(frame)
-    for name in json.loads(mat.get(REVERT_KEY, "{}")).get("active_outputs", []):
-        if nt.nodes.get(name) is not None:
-            nt.nodes[name].is_active_output = True
-    if REVERT_KEY in mat:
-        del mat[REVERT_KEY]
 
 
 def _order_uvs(mesh, lightmap: str) -> None:

@@ -85,7 +85,8 @@ def _wire(mat, image, uv_name: str, frames: Optional[tuple] = None) -> None:
     mat[REVERT_KEY] = json.dumps({"active_outputs": previous})
 
 
-def _unwire(mat) -> None:
+def unwire(mat) -> None:
+    """Remove Apply's node frame from material `mat`, its own output active again as before."""
     nt = mat.node_tree
     frame = nt.nodes.get(FRAME_NAME)
     if frame is not None:
@@ -136,7 +137,7 @@ def apply_lightmap(obj, image, uv_name: str, shared: bool = False, frames: Optio
             mat.name = f"{original.name} ({obj.name} lightmap)"
             _use_nodes(mat)
             if mat.node_tree.nodes.get(FRAME_NAME) is not None:
-                _unwire(mat)  # copied from a material that shows another lightmap
+                unwire(mat)  # copied from a material that shows another lightmap
             entry["copy"] = mat.name
             slot.material = mat
         else:
@@ -168,7 +169,7 @@ def revert(obj) -> bool:
         elif original is not None:
             mat = bpy.data.materials.get(original)
             if mat is not None and mat.node_tree:
-                _unwire(mat)
+                unwire(mat)
     added = record.get("added_slots", 0)
     if added and added == len(obj.data.materials):
         obj.data.materials.clear()  # pop() leaves the object's slot count behind (Blender 4.5, 5.2)
