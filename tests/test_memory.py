@@ -60,7 +60,7 @@ def _bake_alone(resolution: int) -> dict:
 def test_the_estimate_per_texel_bounds_the_peak_a_bake_really_reaches():
     """Bytes per texel, estimated and measured, from a 32² and a 768² bake (0.48 M texels): the
     estimate must not be under the peak (a bake it lets through could run out of memory) nor
-    more than 1.5 times it (a bake that fits would be refused). About 310 bytes a texel now."""
+    more than 1.5 times it (a bake that fits would be refused). About 280 bytes a texel now."""
     small, large = _bake_alone(32), _bake_alone(768)
     texels = large["texels"] - small["texels"]
     measured = (large["peak"] - small["peak"]) / texels

@@ -189,7 +189,8 @@ class DiscIndex(Estimator):
     name = "disc_index"
     # Discs (72), sums (24), tree order and patch sites; the discs' radius, clearance and rise (24),
     # noise sums (16), the sums in flight, what the build leaves: measured, benchmarks/memory.py
-    bytes_per_texel = 200
+    # (200 until the sites' blend tables, 56 bytes a texel, were no longer made for every texel a site)
+    bytes_per_texel = 155
     label = "DETP: Disc Index"
     description = "Tangent-disc density estimation with the discs indexed in a BVH (fastest)"
     streaming = True
