@@ -160,6 +160,13 @@ OPTIONS = (
                      "density and placed on its own"),
                     ("smart", "Smart UV", "New islands from Blender's Smart UV Project (fewer seams), placed on "
                      "their own"))),
+    Option("directional", str, "none", "Directional", "Also bake where the light comes from, for normal-mapped "
+           "shading (lightmap/sh.py)",
+           choices=(("none", "None", "The plain lightmap only"),
+                    ("sh", "SH L1", "The plain lightmap (L0) and, per colour channel, the cosine-weighted mean "
+                     "incoming direction (L1) in <object>.<estimator>.L1.exr"),
+                    ("dominant", "Dominant Direction", "The plain lightmap and one luminance-weighted direction per "
+                     "texel with its directionality in <object>.<estimator>.dir.exr"))),
     Option("margin", int, 16, "Margin", "Pixels of dilation around the UV charts, against seams under filtering",
            minimum=0, maximum=MAX_MARGIN),
     Option("threads", int, 0, "Threads", "Threads for tracing and estimation (0: all cores)", minimum=0,

@@ -138,6 +138,7 @@ class DETPBAKE_PT_lightmaps(_Panel, bpy.types.Panel):
             layout.prop(s, "resolution_mode")
             layout.prop(s, "resolution" if s.resolution_mode == "FIXED" else "texel_density")
         layout.prop(s, "margin")
+        layout.prop(s, "directional")
         layout.prop(s, "output_directory")
         layout.prop(s, "formats")
         layout.prop(s, "apply_after_bake")

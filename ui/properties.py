@@ -62,6 +62,7 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
     atlas_padding: _option("atlas_padding")
     atlas_charts: _option("atlas_charts")
     margin: _option("margin")
+    directional: _option("directional")
     output_directory: StringProperty(name="Output", default="//lightmaps/", subtype="DIR_PATH",
                                      description="Folder for the lightmap files (// is the .blend's folder)")
     formats: EnumProperty(name="Formats", options={"ENUM_FLAG"}, default={f.upper() for f in bake.BakeSettings.formats},

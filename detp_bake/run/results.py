@@ -44,6 +44,10 @@ class BakeResult:
     memory: dict = field(default_factory=dict)  # the estimate made before work, and the peak used
     export: dict = field(default_factory=dict)  # what the exporter found (instances, triangles, textures, …)
     raw_images: dict = field(default_factory=dict)  # object name -> image before denoising (when denoised)
+    # --directional: object name -> (H, W, 9) L1 or (H, W, 4) direction map (run/directional.py), and
+    # what report.json says of it (mode, channel names, clamped texels)
+    l1_images: dict = field(default_factory=dict)
+    directional: dict = field(default_factory=dict)
     cluster: dict = field(default_factory=dict)  # where the photons were traced when not here (distributed.py)
     warnings: list = field(default_factory=list)
     stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit, user (Stop and keep)
@@ -99,6 +103,7 @@ class BakeResult:
             "memory": self.memory,
             "export": self.export,
             "denoised": bool(self.raw_images),
+            **({"directional": self.directional} if self.directional else {}),
             **({"cluster": self.cluster} if self.cluster else {}),
             "warnings": list(self.warnings),
             "seconds": self.seconds,

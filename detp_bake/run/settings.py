@@ -37,6 +37,7 @@ class BakeSettings:
     atlas_size: int = default("atlas_size")
     atlas_padding: int = default("atlas_padding")
     atlas_charts: str = default("atlas_charts")
+    directional: str = default("directional")  # none, sh or dominant (lightmap/sh.py)
     formats: tuple = ("exr",)
     half: bool = False
     threads: int = default("threads")  # 0: all cores

@@ -38,6 +38,10 @@ def output_paths(result: BakeResult, out_dir: Path, frame: Optional[int] = None)
     if result.settings.keep_raw and result.raw_images:
         for name, paths in out.items():
             paths.append(out_dir / f"{stems[name]}.{result.settings.estimator}.raw{number}.exr")
+    if result.l1_images:  # last: Apply takes a lightmap's first EXR as its plain lightmap
+        for name, paths in out.items():
+            paths.append(out_dir / f"{stems[name]}.{result.settings.estimator}.{result.directional['suffix']}"
+                                   f"{number}.exr")
     return out
 
 
@@ -72,8 +76,11 @@ def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Cal
                         fmt = target.suffix[1:]
                         raw = f".{result.settings.estimator}.raw." in target.name
                         picture = result.raw_images[name] if raw else result.images[name]
-                        half = result.settings.half
-                        files.stage(target.name, lambda tmp: images.write_exr(tmp, picture, half=half)
+                        half, channels = result.settings.half, None
+                        if result.l1_images and target is targets[-1]:  # the directional map (output_paths)
+                            picture, channels, half = result.l1_images[name], result.directional["channels"], False
+                        files.stage(target.name, lambda tmp: images.write_exr(tmp, picture, half=half,
+                                                                              channels=channels)
                                     if fmt == "exr" else images.WRITERS[fmt](tmp, picture))
                         done += 1
                         if cancelled():

@@ -389,6 +389,18 @@ def _gather(n, occluded, w, owner, base, out):
 
 
 @jit
+def _gather_l1(n, arrived, w, d, owner, base, out):
+    """Directional lightmaps (lightmap/sh.py): each arriving ray's irradiance times its unit
+    direction towards the light, into out[texel, axis·3 + colour]."""
+    for k in range(n):
+        if arrived[k] > 0.0:
+            i = owner[k] - base
+            for a in range(3):
+                for c in range(3):
+                    out[i, 3 * a + c] += w[k, c] * arrived[k] * d[k, a]
+
+
+@jit
 def _gather_weighted(n, transmitted, w, owner, base, out):
     for k in range(n):
         i = owner[k] - base
@@ -447,9 +459,11 @@ class _DirectWork:
     """The shadow rays of one direct_irradiance call, chunk by chunk (`chunk`, from any thread):
     what every chunk reads (texels, lights, the scene's arrays) is set up once here."""
 
-    def __init__(self, scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel):
+    def __init__(self, scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel,
+                 l1=None, sharp_l1=None):
         self.caster, self.lights, self.samples, self.seed, self.spread = caster, lights, samples, seed, spread
-        self.out, self.sharp, self.progress, self.cancel = out, sharp, progress, cancel
+        self.out, self.sharp, self.progress, self.cancel, self.l1 = out, sharp, progress, cancel, l1
+        self.sharp_l1 = sharp_l1
         n = len(texels)
         self.pos = np.ascontiguousarray(texels.position, np.float64)
         self.nrm = np.ascontiguousarray(texels.normal, np.float64)
@@ -482,6 +496,8 @@ class _DirectWork:
                    np.empty((most, 3)), np.empty(most, np.int64))
         acc = np.zeros((b - a, 3))
         sharp_acc = np.zeros((b - a, 3)) if sharp is not None else None
+        acc_l1 = np.zeros((b - a, 9)) if self.l1 is not None else None
+        sharp_l1 = np.zeros((b - a, 9)) if self.sharp_l1 is not None else None
         shares = None
         if shared:
             shares = np.empty((b - a, len(shared)), np.int64)
@@ -489,21 +505,33 @@ class _DirectWork:
         for li, light in enumerate(lights):
             key = seed_key(self.seed * 7919 + 1000003 * (li + 1))
             own = np.zeros((b - a, 3))
+            own_l1 = np.zeros((b - a, 9)) if acc_l1 is not None else None
             counts = shares[:, shared.index(li)].copy() if li in shared else _NONE
-            disagree = self.cast(index, buffers, light, key, 0, light.samples, _NONE, own, counts)
+            disagree = self.cast(index, buffers, light, key, 0, light.samples, _NONE, own, counts, own_l1)
             if light.extra:
                 # A shadow edge, a spot's rim or the light's horizon crosses the texel's middle.
                 mixed = np.flatnonzero(disagree)
                 if mixed.size:
                     more = np.zeros((b - a, 3))
+                    more_l1 = np.zeros((b - a, 9)) if acc_l1 is not None else None
                     self.cast(index, buffers, light, key, light.samples, light.extra, (mixed + a).astype(np.int64),
-                              more)
+                              more, None, more_l1)
                     n0, n1 = light.samples, light.extra
                     own[mixed] = (n0 * own[mixed] + n1 * more[mixed]) / (n0 + n1)
+                    if acc_l1 is not None:
+                        own_l1[mixed] = (n0 * own_l1[mixed] + n1 * more_l1[mixed]) / (n0 + n1)
             acc += own
+            if acc_l1 is not None:
+                acc_l1 += own_l1
             if sharp is not None and light.kind in SHARP_KINDS:
                 sharp_acc += own
+                if sharp_l1 is not None:
+                    sharp_l1 += own_l1
         self.out[a:b] = acc
+        if acc_l1 is not None:
+            self.l1[a:b] = acc_l1
+        if sharp_l1 is not None:
+            self.sharp_l1[a:b] = sharp_l1
         if sharp is not None:
             sharp[a:b] = sharp_acc
         with self.lock:
@@ -512,9 +540,10 @@ class _DirectWork:
         if self.progress is not None:
             self.progress(fraction)
 
-    def cast(self, index, buffers, light, key, j0, count, sel, into, counts=None):
-        """Rays of `light` (samples j0 … j0 + count − 1) for chunk `index` into `into`; for a light
-        with a top-up, which texels of the chunk its rays disagree on, else None."""
+    def cast(self, index, buffers, light, key, j0, count, sel, into, counts=None, into_l1=None):
+        """Rays of `light` (samples j0 … j0 + count − 1) for chunk `index` into `into` (and their
+        directions into `into_l1`, when given); for a light with a top-up, which texels of the
+        chunk its rays disagree on, else None."""
         a, b = self.chunks[index]
         o, d, t, w, owner = buffers
         counts = _NONE if counts is None else counts
@@ -538,6 +567,8 @@ class _DirectWork:
             occluded = self.caster.occluded(o[:k], d[:k], t[:k])
             _gather(k, occluded, w, owner, a, into)
             arrived = occluded < 0
+        if into_l1 is not None:
+            _gather_l1(k, np.asarray(arrived, np.float64), w, d, owner, a, into_l1)
         self.rays[index] += k
         return _disagree(w[:k].sum(axis=1) * arrived, owner[:k] - a, b - a, count) if light.extra else None
 
@@ -549,7 +580,8 @@ _EMPTY_CDF, _EMPTY_TRI, _EMPTY_VEC = np.zeros(1), np.zeros((1, 3, 3)), np.zeros(
 def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPLES, seed: int = 0,
                       threads: int = 1, progress: Optional[Callable[[float], None]] = None,
                       cancel: Optional[Callable[[], bool]] = None, spread: bool = True,
-                      select: bool = True, sharp: Optional[np.ndarray] = None) -> tuple[np.ndarray, dict]:
+                      select: bool = True, sharp: Optional[np.ndarray] = None,
+                      l1: Optional[np.ndarray] = None, sharp_l1: Optional[np.ndarray] = None) -> tuple[np.ndarray, dict]:
     """Direct irradiance E (N, 3) W/m² at every texel, and counters for report.json. Each chunk
     sums its texels' rays in float64 and stores them as float32: the value is only stored until
     the estimate is added to it, and float32 holds it to the precision of the lightmap images.
@@ -561,14 +593,18 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     `select`: the lights with extent share `samples` rays each per texel, dealt out by what each
     would give the texel unshadowed (light_shares), instead of `samples` rays each. `sharp`, an
     (N, 3) float32 array when given, receives the part of point, spot and sun lights (SHARP_KINDS):
-    their rays all agree away from penumbrae, so that part needs no denoising (bake._finish)."""
+    their rays all agree away from penumbrae, so that part needs no denoising (bake._finish). `l1`,
+    an (N, 9) float32 array when given, receives the directional lightmap's L1 of the same rays
+    (lightmap/sh.py: each arriving ray's irradiance times its direction, axis-major), and `sharp_l1`
+    (with `sharp` and `l1`) the sharp lights' part of it."""
     t0 = time.perf_counter()
     lights = direct_lights(scene, int(samples), spread)
     n = len(texels)
     out = np.zeros((n, 3), np.float32)
     if n == 0 or not lights:
         return out, {"lights": len(lights), "rays": 0, "seconds": 0.0}
-    work = _DirectWork(scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel)
+    work = _DirectWork(scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel, l1,
+                       sharp_l1 if sharp is not None and l1 is not None else None)
     if threads > 1 and len(work.chunks) > 1:
         with ThreadPoolExecutor(threads) as pool:
             for f in [pool.submit(work.chunk, i) for i in range(len(work.chunks))]:
@@ -583,6 +619,9 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
         out[cuts.covered] = 0.0
         if sharp is not None:
             sharp[cuts.covered] = 0.0
+        for part in (l1, sharp_l1):
+            if part is not None:
+                part[cuts.covered] = 0.0
     rays, shared = work.rays, work.shared
     return out, {"lights": len(lights), "samples": int(samples), "rays": int(sum(rays)), "shared": len(shared),
                  "seconds": time.perf_counter() - t0}
