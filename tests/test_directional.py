@@ -184,3 +184,12 @@ def test_every_estimator_gives_the_same_l1_on_the_cornell_box(bpy):
     for est in ESTIMATORS[1:]:
         for name in names:
             assert np.abs(ratios[est, name] - ratios["texel_histogram", name]).max() < 0.03, (est, name)
+
+
+def test_the_memory_estimate_counts_the_l1_channels():
+    from detp_bake.run import memory
+    sc = make_scene([("Plate", grid(2.0, 2.0, 2), 0.5, True)], [_sun()[0]], resolution=64)
+    plain = compute(sc, BakeSettings(photons=20_000, denoise=False)).memory
+    directional_ = compute(sc, BakeSettings(photons=20_000, denoise=False, directional="sh")).memory
+    assert directional_["parts_mb"]["directional maps"] == round(64 * 64 * memory.DIRECTIONAL_BYTES / 1e6, 1)
+    assert "directional maps" not in plain["parts_mb"]

@@ -100,8 +100,12 @@ def _option_arguments(b) -> None:
             b.add_argument(opt.flag, action=argparse.BooleanOptionalAction, default=opt.default,
                            help=f"{opt.help[0].lower()}{opt.help[1:]} (default {default})")
             continue
-        choices = [c[0] for c in opt.choice_list] or None
         text = opt.help[0].lower() + opt.help[1:]
+        if opt.kind is tuple:  # a list of names
+            b.add_argument(opt.flag, nargs="+", default=list(opt.default), metavar=opt.metavar,
+                           help=text.replace("%", "%%"))
+            continue
+        choices = [c[0] for c in opt.choice_list] or None
         if choices:
             text += " (" + "; ".join(f"{v}: {h}" for v, _, h in opt.choice_list) + ")"
         b.add_argument(opt.flag, type=opt.kind, default=opt.default, choices=choices, metavar=opt.metavar,

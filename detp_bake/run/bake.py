@@ -139,6 +139,7 @@ class _Pipeline:
             replace(settings, estimator=name).validate()
         directional_mod.check(settings, self.names, frame_state)
         scene.check()
+        directional_mod.check_shadowmask(settings, scene, frame_state)
         automatic = not settings.photons
         self.settings = settings = replace(settings, photons=auto_photons(scene, settings))
         self.scene, self.offset = scene.recentred()  # float32 rays and discs work near the origin (scene.py)
@@ -198,7 +199,7 @@ class _Pipeline:
         """Direct light by shadow rays (with direct='sampled'); the sharp lights' part apart when the
         lightmaps are denoised, as it stays as the shadow rays give it."""
         self.direct_e, self.sharp_e, self.direct_info = None, None, {"mode": self.settings.direct}
-        self.direct_l1 = self.sharp_l1 = None
+        self.direct_l1 = self.sharp_l1 = self.mask = None
         if not self.sampled:
             return
         settings, tracer = self.settings, self.tracer
@@ -216,9 +217,12 @@ class _Pipeline:
             if settings.directional != "none":
                 self.direct_l1 = np.zeros((len(self.texels), 9), np.float32)
                 self.sharp_l1 = None if self.sharp_e is None else np.zeros((len(self.texels), 9), np.float32)
+            if settings.shadowmask:
+                self.mask = np.zeros((len(self.texels), 4), np.float32)
             self.direct_e, info = direct_mod.direct_irradiance(
                 self.scene, self.texels, self.caster, settings.direct_samples, settings.seed, tracer.threads,
-                direct_progress, self.cancelled, sharp=self.sharp_e, l1=self.direct_l1, sharp_l1=self.sharp_l1)
+                direct_progress, self.cancelled, sharp=self.sharp_e, l1=self.direct_l1, sharp_l1=self.sharp_l1,
+                shadowmask=settings.shadowmask, mask=self.mask, leave_out=settings.shadowmask_mode == "subtract")
         self.direct_info.update(info)
 
     def estimate_progress(self, fraction) -> None:
@@ -388,6 +392,8 @@ class _Pipeline:
         result.direct["denoised_apart"] = apart is not None and bool(result.raw_images)
         result.direct["sharp_kept"] = sharp is not None and bool(result.raw_images)
         apart = sharp = out = value = None
+        if self.mask is not None:
+            directional_mod.shadowmask_images(result, self.mask)
         if l1 is not None:
             t2 = time.perf_counter()
             sharp_part = None if self.sharp_l1 is None else (self.sharp_e, self.sharp_l1)
@@ -557,7 +563,8 @@ def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) ->
     denoised = max((o.resolution * o.resolution for o in scene.objects if o.bake), default=0) \
         if settings.denoise and denoise_mod.available() else 0
     need = memory.estimate(pixels, per_texel, batch, per_photon, per_photon_kept,
-                           settings.threads or os.cpu_count() or 1, hits, geometry, denoised)
+                           settings.threads or os.cpu_count() or 1, hits, geometry, denoised,
+                           settings.directional != "none", bool(settings.shadowmask))
     budget = settings.memory_budget_mb * 1e6 if settings.memory_budget_mb else 0.8 * memory.available_bytes()
     if budget and need.total > budget:
         advice = []

@@ -32,6 +32,36 @@ def check(settings, names, frame_state=None) -> None:
                         "only (their direct light is re-sampled by frame_direct.py, which has no L1)")
 
 
+def check_shadowmask(settings, scene, frame_state=None) -> None:
+    """BakeError before any work when a named light is not one of the scene's lights, or the
+    shadowmask cannot be made as asked (it comes from the shadow rays)."""
+    if not settings.shadowmask:
+        return
+    names = [light.name for light in scene.lights]
+    for name in settings.shadowmask:
+        if name not in names:
+            raise BakeError(f"setting 'shadowmask': light '{name}' is not in the scene (its lights: "
+                            f"{', '.join(names) or 'none'})")
+    if settings.direct != "sampled":
+        raise BakeError(f"setting 'shadowmask' = {list(settings.shadowmask)}: needs direct='sampled' (the mask comes "
+                        "from the shadow rays)")
+    if frame_state is not None:
+        raise BakeError(f"setting 'shadowmask' = {list(settings.shadowmask)}: frame ranges bake plain lightmaps only")
+
+
+def shadowmask_images(result, mask) -> None:
+    """Fill `result.shadowmask_images` ((H, W, 4), dilated, not denoised: a sharp light's mask is
+    exact away from penumbrae) from the per-texel visibility (N, 4), and `result.shadowmask`."""
+    settings, texels = result.settings, result.texels
+    lights = list(settings.shadowmask)
+    for lm in texels.lightmaps:
+        img, m = texels_mod.to_image(mask[lm.texels], lm, texels.pixel[lm.texels])
+        img[..., len(lights):] = 1.0  # unused channels: nothing shadowed
+        result.shadowmask_images[lm.name] = texels_mod.dilate(img, m, settings.margin)
+    result.shadowmask = {"lights": lights, "mode": settings.shadowmask_mode, "channels": ["R", "G", "B", "A"],
+                         "direct_left_out": settings.shadowmask_mode == "subtract"}
+
+
 def l1_value(est_l1, direct_l1, share) -> np.ndarray:
     """Per texel L1 (N, 9) in E/π's unit: the estimate over the share traced plus the shadow rays'."""
     total = est_l1 / share if share < 1.0 else np.array(est_l1, np.float64)

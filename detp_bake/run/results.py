@@ -48,6 +48,10 @@ class BakeResult:
     # what report.json says of it (mode, channel names, clamped texels)
     l1_images: dict = field(default_factory=dict)
     directional: dict = field(default_factory=dict)
+    # --shadowmask: object name -> (H, W, 4) visibility of the masked lights, one per channel in the
+    # order of shadowmask["lights"] (unused channels 1), and what report.json says of it
+    shadowmask_images: dict = field(default_factory=dict)
+    shadowmask: dict = field(default_factory=dict)
     cluster: dict = field(default_factory=dict)  # where the photons were traced when not here (distributed.py)
     warnings: list = field(default_factory=list)
     stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit, user (Stop and keep)
@@ -71,6 +75,16 @@ class BakeResult:
         return [{"name": name, "image": lm.name, **place, **common,
                  **({"key": self.keys[name], "reused": False} if name in self.keys else {})}
                 for name, place in lm.placement.items()]
+
+    def extra_maps(self) -> list:
+        """(file suffix, {object name: image}, channel names) of the maps written beside each
+        lightmap: <object>.<estimator>.<suffix>.exr (writing.py)."""
+        out = []
+        if self.l1_images:
+            out.append((self.directional["suffix"], self.l1_images, self.directional["channels"]))
+        if self.shadowmask_images:
+            out.append(("shadowmask", self.shadowmask_images, self.shadowmask["channels"]))
+        return out
 
     def report(self) -> dict:
         st = self.stats
@@ -104,6 +118,7 @@ class BakeResult:
             "export": self.export,
             "denoised": bool(self.raw_images),
             **({"directional": self.directional} if self.directional else {}),
+            **({"shadowmask": self.shadowmask} if self.shadowmask else {}),
             **({"cluster": self.cluster} if self.cluster else {}),
             "warnings": list(self.warnings),
             "seconds": self.seconds,

@@ -38,6 +38,9 @@ class BakeSettings:
     atlas_padding: int = default("atlas_padding")
     atlas_charts: str = default("atlas_charts")
     directional: str = default("directional")  # none, sh or dominant (lightmap/sh.py)
+    # Lights whose visibility goes into a shadowmask, and whether their direct light leaves the lightmap
+    shadowmask: tuple = default("shadowmask")
+    shadowmask_mode: str = default("shadowmask_mode")
     formats: tuple = ("exr",)
     half: bool = False
     threads: int = default("threads")  # 0: all cores
