@@ -69,8 +69,10 @@ class Option:
         Optional field, a float to seven significant digits."""
         if self.auto is not None and value == self.auto and self.name in OPTIONAL:
             return None
-        if self.kind is tuple:
-            return tuple(value or ())
+        if self.kind is tuple:  # names: a list (command line) or comma-separated (the panel's text)
+            if isinstance(value, str):
+                value = [v.strip() for v in value.split(",")]
+            return tuple(v for v in (value or ()) if v)
         if self.kind is float and isinstance(value, float):
             # Blender keeps a float property in single precision (0.65 reads 0.6499999761581421):
             # seven digits give the panel and the command line the same number.

@@ -85,3 +85,15 @@ def test_bad_shadowmask_settings_are_refused_by_name():
         BakeSettings(shadowmask=("a", "b", "c", "d", "e")).validate()
     with pytest.raises(BakeError, match="shadowmask.*direct='sampled'"):
         compute(sc, BakeSettings(shadowmask=("Sun",), direct="photons"))
+
+
+def test_the_command_line_list_and_the_panels_text_give_the_same_settings():
+    from detp_bake import cli, options
+    line = cli.settings_from_args(cli.build_parser().parse_args(
+        ["bake", "x.blend", "--out", "o", "--shadowmask", "Sun", "Lamp", "--shadowmask-mode", "overlay",
+         "--directional", "sh"]))
+    panel = BakeSettings.from_choices({"shadowmask": " Sun, Lamp ,", "shadowmask_mode": "overlay",
+                                       "directional": "sh"})
+    assert line == panel and line.shadowmask == ("Sun", "Lamp")
+    assert options.default("shadowmask") == () == cli.settings_from_args(
+        cli.build_parser().parse_args(["bake", "x.blend", "--out", "o"])).shadowmask

@@ -63,6 +63,10 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
     atlas_charts: _option("atlas_charts")
     margin: _option("margin")
     directional: _option("directional")
+    # A list of names on the command line, comma-separated text here (options.Option.core)
+    shadowmask: StringProperty(name=options.BY_NAME["shadowmask"].label, default="",
+                               description=options.BY_NAME["shadowmask"].help + " (comma-separated light names)")
+    shadowmask_mode: _option("shadowmask_mode")
     output_directory: StringProperty(name="Output", default="//lightmaps/", subtype="DIR_PATH",
                                      description="Folder for the lightmap files (// is the .blend's folder)")
     formats: EnumProperty(name="Formats", options={"ENUM_FLAG"}, default={f.upper() for f in bake.BakeSettings.formats},
