@@ -7,7 +7,7 @@ import pytest
 
 from detp_bake.errors import BakeError
 from detp_bake.lightmap import atlas, texels as texels_mod
-from detp_bake.scene import BakeObject, PointLight, Scene
+from detp_bake.scene import AreaLight, BakeObject, PointLight, Scene
 
 
 def box(size, at=(0.0, 0.0, 0.0)):
@@ -172,3 +172,89 @@ def test_linked_duplicates_get_meshes_and_texels_of_their_own(cornell, bpy):
     assert lm.overlap < 0.01
     rects = [lm.placement[n]["rect"] for n in ("ShortBox", "ShortBoxTwin")]
     assert rects[0] != rects[1]
+
+
+def _two_plates_in_one_atlas(gap_texels: float, res: int = 64):
+    """A plate under a square area light (its direct light is soft, so it is denoised) and a plate
+    facing away from it (it receives nothing at all), their charts side by side in one atlas
+    `gap_texels` apart."""
+    def plate(x0, facing_up):
+        p = np.array([[[x0, 0, 0], [x0 + 1, 0, 0], [x0 + 1, 1, 0]], [[x0, 0, 0], [x0 + 1, 1, 0], [x0, 1, 0]]], float)
+        return p if facing_up else p[:, [0, 2, 1]]
+    half = (0.5 - 0.5 * gap_texels / res)
+    uv_left = np.array([[[0.02, 0.02], [half, 0.02], [half, 0.98]], [[0.02, 0.02], [half, 0.98], [0.02, 0.98]]])
+    uv_right = uv_left + [0.5 + 0.5 * gap_texels / res - 0.02, 0.0]
+    lit, dark = plate(0.0, True), plate(3.0, False)
+    tris = np.concatenate([lit, dark])
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    objs = [BakeObject("Lit", 0, 2, res, True, image="atlas_0"), BakeObject("Dark", 2, 2, res, True, image="atlas_0")]
+    return Scene(positions=tris, normals=np.repeat(n[:, None], 3, axis=1),
+                 uvs=np.concatenate([uv_left, uv_right[:, [0, 2, 1]]]).astype(np.float32),
+                 albedo=np.zeros((4, 3)), emission=np.zeros((4, 3)), objects=objs,
+                 lights=[AreaLight("Panel", np.array([[1, 0, 0, 0.5], [0, 1, 0, 0.5], [0, 0, 1, 1.0], [0, 0, 0, 1.0]]),
+                                   "SQUARE", 0.5, 0.5, np.full(3, 100.0))], world=np.zeros(3))
+
+
+def test_denoising_an_atlas_keeps_one_objects_light_off_its_neighbour():
+    from detp_bake.lightmap import denoise
+    from detp_bake.run.bake import BakeSettings, compute
+    if not denoise.available():
+        pytest.skip("pyoidn is not installed")
+    r = compute(_two_plates_in_one_atlas(gap_texels=3), BakeSettings(photons=20_000, seed=1, margin=2))
+    (lm,) = r.texels.lightmaps
+    image, mask = r.images["atlas_0"], r.masks["atlas_0"]
+    owner = r.texels.triangle[lm.texels] >= 2  # the dark plate's texels
+    dark = np.zeros(mask.shape, bool)
+    dark.flat[r.texels.pixel[lm.texels][owner]] = True
+    lit_mean = image[mask & ~dark].mean()
+    assert lit_mean > 1.0 and image[dark].max() <= 1e-6 * lit_mean
+
+
+def test_compare_and_frame_ranges_work_on_atlases(cornell, bpy, tmp_path):
+    from detp_bake.cli import main
+    atlas_args = ["--lightmaps", "atlas", "--texel-density", "8", "--atlas-size", "128", "--photons", "30000"]
+    assert main(["compare", "--estimators", "texel_histogram", "disc_index", "--out", str(tmp_path / "cmp"),
+                 *atlas_args], bl_scene=cornell) == 0
+    for name in ("texel_histogram", "disc_index"):
+        assert (tmp_path / "cmp" / f"atlas_0.{name}.exr").exists()
+    report = json.loads((tmp_path / "cmp" / "report.json").read_text())
+    entries = report["estimators"]["disc_index"]["objects"]
+    assert {e["image"] for e in entries} == {"atlas_0"} and len(entries) == 7
+    # A range: the hybrid, with the tall box moving between the frames; one atlas per frame.
+    tall = cornell.objects["TallBox"]
+    tall.keyframe_insert("location", frame=1)
+    tall.location.x += 0.3
+    tall.keyframe_insert("location", frame=2)
+    assert main(["bake", "--frames", "1-2", "--estimator", "hybrid", "--out", str(tmp_path / "frames"),
+                 *atlas_args], bl_scene=cornell) == 0
+    assert sorted(p.name for p in (tmp_path / "frames").glob("atlas_0.hybrid.*.exr")) == \
+        ["atlas_0.hybrid.0001.exr", "atlas_0.hybrid.0002.exr"]
+
+
+def test_live_preview_and_revert_of_an_atlas_leave_the_materials_as_they_were(cornell, bpy, tmp_path):
+    from detp_bake import blender
+    from detp_bake.blender.preview import LivePreview
+    from detp_bake.run.bake import BakeSettings, compute
+    from detp_bake.run.results import preview_images
+    from detp_bake.run.writing import write
+    settings = BakeSettings(lightmaps="atlas", texel_density=8.0, atlas_size=128, photons=20_000, denoise=False)
+    scene = blender.export_scene(cornell, atlas=settings, log=lambda m: None)
+    r = compute(scene, settings)
+    names = [o.name for o in scene.objects]
+    before = {m.name: len(m.node_tree.nodes) for m in bpy.data.materials if m.node_tree}
+    preview = LivePreview(cornell, names, None)
+    preview.update(preview_images(r.texels, r.value, settings.margin))
+    for name in names:  # every object shows the atlas through the atlas layer
+        mat = cornell.objects[name].material_slots[0].material
+        assert any(n.type == "UVMAP" and n.uv_map == "LightmapAtlas" for n in mat.node_tree.nodes), name
+    preview.end()
+    assert {m.name: len(m.node_tree.nodes) for m in bpy.data.materials if m.node_tree} == before
+    assert not [i for i in bpy.data.images if i.name.startswith("detp_bake preview")]
+    write(r, tmp_path)
+    blender.apply_all(cornell, r.files, None, settings.estimator)
+    assert len([i for i in bpy.data.images if i.name.startswith("atlas_0")]) == 1  # loaded once
+    for name in names:
+        assert blender.revert(cornell.objects[name])
+    assert {m.name: len(m.node_tree.nodes) for m in bpy.data.materials if m.node_tree} == before
+    assert not [i for i in bpy.data.images if i.name.startswith("atlas_0")]

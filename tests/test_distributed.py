@@ -296,3 +296,10 @@ def test_a_frame_range_on_the_cluster_writes_what_a_range_here_writes(cluster, t
                 assert open(mine, "rb").read() == open(theirs, "rb").read(), (frame, name)
     assert all(section["cluster"]["workers"] == 2 for section in far.sections)
     assert not any("cluster" in section for section in here.sections)
+
+
+def test_an_atlas_bakes_on_the_cluster_as_here(cluster):
+    from test_atlas import _two_plates_in_one_atlas
+    sc = _two_plates_in_one_atlas(gap_texels=3)
+    settings = BakeSettings(photons=60_000, batch_size=20_000, seed=4)
+    _same(compute(sc, settings), compute(sc, settings, cluster=cluster))

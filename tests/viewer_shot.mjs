@@ -1,6 +1,7 @@
 // Screenshot of the web viewer in headless Chromium, for tests/test_viewer.py.
 //   node tests/viewer_shot.mjs URL OUT.png WIDTH HEIGHT [CHROMIUM]
-// Prints one JSON line: {"console": [{type, text}], "errors": [...], "ready": bool}.
+// Prints one JSON line: {"console": [{type, text}], "errors": [...], "ready": bool, "info": {...},
+// "renderer": the WebGL renderer's name}.
 // WebGL runs on SwiftShader (software), so it works on machines with no GPU.
 import { createRequire } from 'node:module';
 
@@ -25,6 +26,7 @@ try {
   await page.waitForFunction(() => window.viewerReady === true, null, { timeout: 60000 });
   result.ready = true;
   result.errors.push(...await page.evaluate(() => window.viewerErrors));
+  result.info = await page.evaluate(() => window.viewerInfo);
   result.renderer = await page.evaluate(() => {
     const gl = document.createElement('canvas').getContext('webgl2');
     const info = gl && gl.getExtension('WEBGL_debug_renderer_info');

@@ -3,6 +3,7 @@
 //   &exposure=EV           scale the lightmaps by 2^EV, as Blender's Exposure (Color Management)
 //   &shot=1                for tests: no panel, and window.viewerReady = true once a frame of the
 //                          loaded model is on screen; window.viewerErrors holds what went wrong
+//                          and window.viewerInfo what was shown
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -16,6 +17,7 @@ const canvas = document.getElementById('view');
 
 window.viewerReady = false;
 window.viewerErrors = [];
+window.viewerInfo = null;
 if (shot) {
   document.body.classList.add('shot');
   // Keep what the console says, so a test can fail on it even where it cannot read the console.
@@ -112,6 +114,7 @@ function show(gltf, name) {
       scaled.add(m);
     }
   });
+  window.viewerInfo = { model: name, lightmapped, camera: gltf.cameras.length ? 'gltf' : 'framed' };
   say(`${name}: ${lightmapped} lightmapped mesh${lightmapped === 1 ? '' : 'es'}`);
   if (shot) {
     // Two frames: the first compiles and draws, the second is certainly on screen.

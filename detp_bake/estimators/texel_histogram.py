@@ -134,6 +134,14 @@ def _add_l1(texel, weight, flux, direction, acc):
                     acc[k, 3 * x + c] += flux[h, c] * a * back
 
 
+def _adopt_or_add(own: np.ndarray, given: np.ndarray, fresh: bool) -> np.ndarray:
+    """`given` itself where `own` holds nothing yet and `given` may be kept, else own + given."""
+    if fresh and given.flags.writeable and given.flags.owndata and given.shape == own.shape:
+        return given
+    own += given
+    return own
+
+
 @register
 class TexelHistogram(Estimator):
     name = "texel_histogram"
@@ -194,20 +202,22 @@ class TexelHistogram(Estimator):
         self.seconds += time.perf_counter() - t0
 
     def take(self):
-        sums = {"irradiance": self.acc.copy(), "landings": self.landings, "counted": self.counted,
+        """Hands its sums over, not a copy (the bake adopts or adds them), and starts again from
+        zeros that take no memory until a photon lands: 24 bytes a texel less at 2048²."""
+        sums = {"irradiance": self.acc, "landings": self.landings, "counted": self.counted,
                 "seconds_query": self.seconds}
-        self.acc[:] = 0.0
+        self.acc = np.zeros(self.acc.shape)
         if self.acc_l1 is not None:
-            sums["l1"] = self.acc_l1.copy()
-            self.acc_l1[:] = 0.0
+            sums["l1"], self.acc_l1 = self.acc_l1, np.zeros(self.acc_l1.shape)
         self.landings = self.counted = 0
         self.seconds = 0.0
         return sums
 
     def absorb(self, sums):
-        self.acc += sums["irradiance"]
+        fresh = self.landings == 0  # nothing of its own yet: the sums become its own (0 + x is x)
+        self.acc = _adopt_or_add(self.acc, sums["irradiance"], fresh)
         if self.acc_l1 is not None:
-            self.acc_l1 += sums["l1"]
+            self.acc_l1 = _adopt_or_add(self.acc_l1, sums["l1"], fresh)
         self.landings += sums["landings"]
         self.counted += sums["counted"]
         self.seconds += sums["seconds_query"]

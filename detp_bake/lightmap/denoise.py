@@ -38,7 +38,7 @@ from typing import Optional
 
 import numpy as np
 
-from scipy.ndimage import find_objects
+from scipy.ndimage import distance_transform_edt, find_objects
 
 from ..errors import BakeError
 from .texels import dilate, neighbour_pairs
@@ -121,7 +121,7 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
                      normal: Optional[np.ndarray] = None, filter: Optional[str] = None,
                      keep_energy: bool = True, margin: int = 16, quality: str = "high",
                      weights: Optional[np.ndarray] = None, regions: Optional[np.ndarray] = None,
-                     fragments=None) -> np.ndarray:
+                     fragments=None, apart: int = 1) -> np.ndarray:
     """Denoise one lightmap and return a new (H, W, 3) float32 image in the same layout.
 
     image: (H, W, 3) irradiance E/π (HDR, ≥ 0), row 0 at the bottom as in texels.py; only the
@@ -147,6 +147,7 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     different runs (`region_runs`), every texel outside a run being gutter to it.
     fragments: the texels of charts too narrow for OIDN and their neighbours on the surface
     (fragments.Fragments): they are gutter to every OIDN run, and take their neighbours' mean.
+    apart: regions within this many texels are denoised in different runs (`region_runs`).
 
     Raises BakeError for a bad shape or filter, NaN/inf in covered texels, a missing pyoidn, or
     an OIDN failure.
@@ -179,7 +180,7 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
         np.maximum(covered, 0.0, out=covered)
         result.reshape(-1, 3)[fragments.pixel] = fragments.smooth(covered)
         del covered
-    for box, part, network in region_runs(regions, runs_mask):
+    for box, part, network in region_runs(regions, runs_mask, apart):
         pick = lambda a: None if a is None else a[box]  # noqa: E731
         if network:
             result[box][part] = _denoise_part(image[box], part, pick(albedo), pick(normal), filter, keep_energy,
@@ -187,17 +188,32 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
         else:
             w = None if weights is None or not weights[box][part].sum() > 0 else weights[box][part]
             result[box][part] = np.average(np.maximum(image[box][part], 0.0), axis=0, weights=w)
-    return dilate(result, mask, margin)
+    return dilate(result, mask, margin, in_place=True)
 
 
-def region_runs(regions: Optional[np.ndarray], mask: np.ndarray) -> list:
+def _touching(label: np.ndarray, count: int, reach: int) -> np.ndarray:
+    """Sorted codes a·count + b of labels a ≠ b that lie within `reach` texels of each other (1:
+    8-neighbours): each gutter texel within reach/2 takes its nearest covered texel's label."""
+    if reach > 1:
+        far, (rows, cols) = distance_transform_edt(label < 0, return_indices=True)
+        label = np.where(far <= 0.5 * reach + 0.5, label[rows, cols], -1)
+    touch = np.zeros(0, np.int64)
+    for a, b in neighbour_pairs(label):
+        differ = (a >= 0) & (b >= 0) & (a != b)
+        touch = np.concatenate([touch, a[differ] * count + b[differ], b[differ] * count + a[differ]])
+    return np.unique(touch)
+
+
+def region_runs(regions: Optional[np.ndarray], mask: np.ndarray, reach: int = 1) -> list:
     """[(box, texels, denoise)]: how one lightmap is denoised, as runs over the (H, W) image's
     slices `box` (row slice, column slice), each on the texels of its mask `texels` (the box's
     shape) with OIDN (`denoise`) or as their mean. Without regions, one OIDN run over the whole
     image. With regions: one OIDN run over the whole image for the largest regions and every region
     that touches none of them (greedily, largest first), then each other region apart, in the box
     of its texels and FILL_RINGS round them; a region of fewer than MIN_REGION texels (a sliver by a
-    wall) is too small for the network to see anything in, and takes its mean."""
+    wall) is too small for the network to see anything in, and takes its mean. Regions touch when
+    they are 8-neighbours, or with `reach` when they lie within that many texels (an atlas's
+    objects: their charts lie a padding apart, and none may take another's light)."""
     whole = (slice(0, mask.shape[0]), slice(0, mask.shape[1]))
     if regions is None or not mask.any():
         return [(whole, mask, True)]
@@ -205,11 +221,7 @@ def region_runs(regions: Optional[np.ndarray], mask: np.ndarray) -> list:
     count = int(label.max()) + 1
     if count <= 1:
         return [(whole, mask, True)]
-    touch = np.zeros(0, np.int64)
-    for a, b in neighbour_pairs(label):
-        differ = (a >= 0) & (b >= 0) & (a != b)
-        touch = np.concatenate([touch, a[differ] * count + b[differ], b[differ] * count + a[differ]])
-    touch = np.unique(touch)
+    touch = _touching(label, count, reach)
     near = np.split(touch % count, np.searchsorted(touch // count, np.arange(1, count)))
     size = np.bincount(label[label >= 0], minlength=count)
     first = np.zeros(count, bool)
@@ -282,7 +294,8 @@ _device = None
 def _run_filter(color: np.ndarray, filter: str, quality: int, hdr: bool = False, clean_aux: bool = False,
                 albedo: Optional[np.ndarray] = None, normal: Optional[np.ndarray] = None) -> np.ndarray:
     """OIDN on one image: a filter of its own, its scratch bounded (MAX_MEMORY_MB) and released
-    on return. The CPU device is made once (bakes run one at a time: job.py)."""
+    on return. The CPU device is made once (bakes run one at a time: job.py). (OIDN could write
+    its output over `color`, with the same bytes, but its peak at 2048² stays the same.)"""
     global _device
     pyoidn = _pyoidn()
 

@@ -11,9 +11,18 @@ this leaves out.
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 MIN_GROUPS = 4  # groups needed before the estimate is trusted for stopping a bake
+
+
+@numba.njit(cache=True)
+def _add_wx2(lum, previous, w, sum_wx2):
+    """sum_wx2 += w·x·x with x = (lum − previous)/w, in numpy's order of operations."""
+    for i in range(lum.shape[0]):
+        x = (lum[i] - previous[i]) / w
+        sum_wx2[i] += w * x * x
 
 
 class BatchNoise:
@@ -32,8 +41,7 @@ class BatchNoise:
         w = share - self.weight
         if w <= 0.0:
             return
-        x = (lum - self.previous) / w
-        self.sum_wx2 += w * x * x
+        _add_wx2(lum, self.previous, float(w), self.sum_wx2)  # no (N,) temporaries: 27 MB each at 2048²
         self.previous = lum
         self.weight = share
         self.groups += 1

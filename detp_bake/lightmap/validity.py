@@ -360,3 +360,16 @@ def regions(texels: TexelSet, lm, cuts: Cuts, caster, scene) -> np.ndarray:
     out = np.full(lm.width * lm.height, -1, np.int32)
     out[texels.pixel[sl]] = label
     return out.reshape(lm.height, lm.width)
+
+
+def by_object(texels: TexelSet, lm, scene, regions=None) -> np.ndarray:
+    """(H, W) int32 labels of an atlas `lm` (−1 in the gutter): its `regions` (or one per object)
+    split by object, so that the denoiser keeps every object's light to itself."""
+    sl = lm.texels
+    starts = np.array([scene.objects[i].first_triangle for i in lm.members])
+    owner = np.searchsorted(starts, texels.triangle[sl], side="right") - 1
+    base = np.zeros(lm.count, np.int64) if regions is None else regions.reshape(-1)[texels.pixel[sl]].astype(np.int64)
+    _, label = np.unique(owner * (int(base.max()) + 1) + base, return_inverse=True)
+    out = np.full(lm.width * lm.height, -1, np.int32)
+    out[texels.pixel[sl]] = label.reshape(-1)
+    return out.reshape(lm.height, lm.width)

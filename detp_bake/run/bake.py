@@ -345,10 +345,14 @@ class _Pipeline:
         """Each estimator's lightmaps, denoised by region and with the fragments smoothed."""
         settings, texels, scene = self.settings, self.texels, self.scene
         self.estimate_progress(0.0)
-        # Texels a wall separates are denoised apart (validity.regions), in lightmaps that have cuts.
+        # Texels a wall separates are denoised apart (validity.regions), in lightmaps that have cuts;
+        # so are the objects of an atlas (validity.by_object).
         t1 = time.perf_counter()
         self.regions = {lm.name: validity.regions(texels, lm, texels.cuts, self.caster, scene)
                         for lm in texels.lightmaps if settings.denoise and (texels.cuts.of[lm.texels] >= 0).any()}
+        for lm in texels.lightmaps:
+            if settings.denoise and len(lm.members) > 1:
+                self.regions[lm.name] = validity.by_object(texels, lm, scene, self.regions.get(lm.name))
         self.validity_seconds += time.perf_counter() - t1
         # Texels of charts too narrow for OIDN take their neighbours' mean on the surface (fragments.py),
         # found lightmap by lightmap as each is denoised; a comparison's estimators share them (one
@@ -516,7 +520,8 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
             frag = fragments_of(lm) if fragments_of is not None else None
             counters["fragment_texels"] = counters.get("fragment_texels", 0) + (len(frag) if frag else 0)
             denoised = partial(denoise_mod.denoise_lightmap, mask=mask, margin=settings.margin, weights=area[..., 0],
-                               regions=(regions or {}).get(lm.name), fragments=frag)
+                               regions=(regions or {}).get(lm.name), fragments=frag,
+                               apart=denoise_mod.FILL_RINGS if len(lm.members) > 1 else 1)
             if direct is None:
                 result_images[lm.name] = denoised(img)
             else:
@@ -528,7 +533,7 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
                 if sharp is not None:
                     kept, _ = texels_mod.to_image(sharp[lm.texels] / np.float32(np.pi), lm, pixel)
                     first = np.maximum(first - kept, 0.0, out=first)  # what the soft emitters gave
-                    kept = texels_mod.dilate(kept, mask, settings.margin)
+                    kept = texels_mod.dilate(kept, mask, settings.margin, in_place=True)
                 if sharp is not None and lm.width * lm.height >= ONE_PASS_FROM:  # soft direct + indirect: one OIDN run
                     rest += first
                     first = None
