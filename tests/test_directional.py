@@ -123,19 +123,25 @@ def test_dominant_direction_map():
 
 def test_the_l1_file_and_its_channels(tmp_path):
     """<name>.<estimator>.L1.exr holds the nine L1 channels by name, after the plain EXR (which
-    Apply takes), and report.json says the layout."""
+    Apply takes), then the same numbers as one RGB file per axis (L1x, L1y, L1z: what Blender's
+    image loader reads); report.json says the layout."""
     sun, _ = _sun()
     sc = make_scene([("Plate", grid(2.0, 2.0, 2), 0.5, True)], [sun], resolution=8)
     result = bake(sc, BakeSettings(photons=50_000, denoise=False, directional="sh"), tmp_path)
     files = result.files["Plate"]
-    assert [f.rsplit("/", 1)[1] for f in files] == ["Plate.texel_histogram.exr", "Plate.texel_histogram.L1.exr"]
+    assert [f.rsplit("/", 1)[1] for f in files] == ["Plate.texel_histogram.exr", "Plate.texel_histogram.L1.exr"] + \
+        [f"Plate.texel_histogram.{axis}.exr" for axis in sh.AXIS_FILES]
     import OpenImageIO as oiio
     spec = oiio.ImageInput.open(files[1]).spec()
     assert tuple(spec.channelnames) == sh.L1_CHANNELS
     assert spec.format == oiio.FLOAT
     assert np.array_equal(images.read_image(files[1]), result.l1_images["Plate"])
+    for a, path in enumerate(files[2:]):
+        assert tuple(oiio.ImageInput.open(path).spec().channelnames) == ("R", "G", "B")
+        assert np.array_equal(images.read_image(path), result.l1_images["Plate"][..., 3 * a:3 * a + 3])
     report = result.report()["directional"]
     assert report["channels"] == list(sh.L1_CHANNELS) and report["suffix"] == "L1"
+    assert report["axis_files"] == ["L1x", "L1y", "L1z"]
 
 
 def test_shading_formula_is_exact_for_a_delta_and_a_sky():

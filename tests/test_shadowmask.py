@@ -70,9 +70,10 @@ def test_the_shadowmask_file(tmp_path):
     result = bake(_scene([lamp]), BakeSettings(photons=50_000, denoise=False, shadowmask=("Lamp", "Sun"),
                                                directional="sh"), tmp_path)
     files = [f.rsplit("/", 1)[1] for f in result.files["Plate"]]
-    assert files == ["Plate.texel_histogram.exr", "Plate.texel_histogram.L1.exr",
+    assert files == ["Plate.texel_histogram.exr", "Plate.texel_histogram.L1.exr", "Plate.texel_histogram.L1x.exr",
+                     "Plate.texel_histogram.L1y.exr", "Plate.texel_histogram.L1z.exr",
                      "Plate.texel_histogram.shadowmask.exr"]
-    written = images.read_image(tmp_path / files[2])
+    written = images.read_image(tmp_path / files[-1])
     assert written.shape[2] == 4 and np.array_equal(written, result.shadowmask_images["Plate"])
     assert result.report()["shadowmask"]["lights"] == ["Lamp", "Sun"]
 
@@ -87,7 +88,9 @@ def test_bad_shadowmask_settings_are_refused_by_name():
         compute(sc, BakeSettings(shadowmask=("Sun",), direct="photons"))
 
 
-def test_the_command_line_list_and_the_panels_text_give_the_same_settings():
+def test_the_command_line_list_and_comma_separated_text_give_the_same_settings():
+    """The core reads a list of names or one comma-separated text (options.Option.core); the
+    panel's per-light toggles are tested in test_addon.py."""
     from detp_bake import cli, options
     line = cli.settings_from_args(cli.build_parser().parse_args(
         ["bake", "x.blend", "--out", "o", "--shadowmask", "Sun", "Lamp", "--shadowmask-mode", "overlay",

@@ -287,7 +287,7 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
     # The files are in place: from here on a signal no longer undoes the bake.
     saved = None
     if args.apply:
-        blender.apply_all(bl_scene, files, args.uv_layer, settings.estimator)
+        blender.apply_all(bl_scene, files, args.uv_layer, settings.estimator, log=_log)
     if args.save:
         saved = Path(args.save).resolve()
         blender.save_blend(saved, files)

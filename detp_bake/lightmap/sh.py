@@ -39,6 +39,9 @@ import numpy as np
 
 # The channel layout of <name>.<estimator>.L1.exr: three world-space components per colour channel.
 L1_CHANNELS = tuple(f"L1{axis}.{colour}" for axis in "xyz" for colour in "RGB")
+# The same L1 again as one RGB file per axis, <name>.<estimator>.L1x.exr …: Blender's image loader
+# reads an EXR's R, G, B (A) and nothing else, and engines sample three colour textures.
+AXIS_FILES = ("L1x", "L1y", "L1z")
 DOMINANT_CHANNELS = ("dir.x", "dir.y", "dir.z", "directionality")
 HEMISPHERE_RATIO = 2.0 / 3.0  # |L1|/L0 of a uniform sky over an open plane
 WALL_TILT = float(np.arctan(2.0 / np.pi))  # radians: the wall under a sky on a black ground

@@ -99,7 +99,8 @@ def make_images(result, l1, regions=None, fragments_of=None, sharp=None) -> None
         result.l1_images[lm.name] = np.ascontiguousarray(out, np.float32)
     result.directional = {"mode": settings.directional, "denoised": bool(denoise), "clamped_texels": clamped,
                           "channels": list(sh.L1_CHANNELS if settings.directional == "sh" else sh.DOMINANT_CHANNELS),
-                          "suffix": suffix(settings.directional)}
+                          "suffix": suffix(settings.directional),
+                          **({"axis_files": list(sh.AXIS_FILES)} if settings.directional == "sh" else {})}
 
 
 def _denoised(settings, texels, lm, pixel, mask, raw0, raw1, regions, fragments_of, sharp) -> np.ndarray:

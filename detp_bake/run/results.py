@@ -82,6 +82,8 @@ class BakeResult:
         out = []
         if self.l1_images:
             out.append((self.directional["suffix"], self.l1_images, self.directional["channels"]))
+            for a, axis in enumerate(self.directional.get("axis_files", [])):  # RGB, for Blender and engines
+                out.append((axis, {name: img[..., 3 * a:3 * a + 3] for name, img in self.l1_images.items()}, None))
         if self.shadowmask_images:
             out.append(("shadowmask", self.shadowmask_images, self.shadowmask["channels"]))
         return out
