@@ -69,7 +69,7 @@ class Option:
         Optional field, a float to seven significant digits."""
         if self.auto is not None and value == self.auto and self.name in OPTIONAL:
             return None
-        if self.kind is tuple:  # names: a list (command line) or comma-separated (the panel's text)
+        if self.kind is tuple:  # names: a list (command line, the panel's toggles) or comma-separated text
             if isinstance(value, str):
                 value = [v.strip() for v in value.split(",")]
             return tuple(v for v in (value or ()) if v)

@@ -411,10 +411,32 @@ def test_the_panel_and_the_command_line_build_the_same_settings(addon, cornell, 
     assert panel == line
     if not choices:
         assert panel == BakeSettings() and panel.estimator_settings.radius_texels is None
-    # Every setting is on the panel, but the memory budget, which is a preference of the machine.
-    assert {o.name for o in options.OPTIONS if not hasattr(s, o.name)} == {"memory_budget_mb"}
+    # Every setting is on the scene's panel, but the memory budget, which is a preference of the
+    # machine, and the shadowmask, a toggle on each light (the next test).
+    assert {o.name for o in options.OPTIONS if not hasattr(s, o.name)} == {"memory_budget_mb", "shadowmask"}
     for name in choices:  # reset for the next case
         s.property_unset(name)
+
+
+def test_the_lights_shadowmask_toggles_are_the_command_lines_list(addon, cornell, bpy):
+    """One Shadowmask toggle per light (object.detp_bake.shadowmask): the lights switched on, in
+    name order, are the command line's --shadowmask list; none on, none masked."""
+    from detp_bake import cli
+
+    common = sys.modules[f"{PACKAGE}.operators.common"]
+    sun = bpy.data.objects.new("A Sun", bpy.data.lights.new("A Sun", "SUN"))
+    cornell.collection.objects.link(sun)
+    lamp = next(o for o in cornell.objects if o.type == "LIGHT" and o is not sun)
+    assert common.bake_settings(bpy.context).shadowmask == ()
+    for light in (lamp, sun):
+        light.detp_bake.shadowmask = True
+    cornell.detp_bake.shadowmask_mode = "overlay"
+    panel = common.bake_settings(bpy.context)
+    line = cli.settings_from_args(cli.build_parser().parse_args(
+        ["bake", "x.blend", "--out", "o", "--shadowmask", "A Sun", lamp.name, "--shadowmask-mode", "overlay"]))
+    assert panel == line and panel.shadowmask == ("A Sun", lamp.name)
+    lamp.detp_bake.shadowmask = False
+    assert common.bake_settings(bpy.context).shadowmask == ("A Sun",)
 
 
 def test_a_second_panel_bake_keeps_unchanged_lightmaps_and_rebake_all_bakes_them(addon, cornell, bpy, tmp_path):

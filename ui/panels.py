@@ -139,9 +139,14 @@ class DETPBAKE_PT_lightmaps(_Panel, bpy.types.Panel):
             layout.prop(s, "resolution" if s.resolution_mode == "FIXED" else "texel_density")
         layout.prop(s, "margin")
         layout.prop(s, "directional")
-        layout.prop(s, "shadowmask")
+        lights = sorted((o for o in context.scene.objects if o.type == "LIGHT"), key=lambda o: o.name)
+        col = layout.column(heading="Shadowmask", align=True)
+        for light in lights:  # one toggle per light: the command line's --shadowmask list
+            col.prop(light.detp_bake, "shadowmask", text=light.name)
+        if not lights:
+            col.label(text="No lights in the scene")
         row = layout.row()
-        row.active = bool(s.shadowmask.strip())
+        row.active = any(light.detp_bake.shadowmask for light in lights)
         row.prop(s, "shadowmask_mode")
         layout.prop(s, "output_directory")
         layout.prop(s, "formats")
@@ -164,6 +169,8 @@ class DETPBAKE_PT_object(_Panel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         obj = context.active_object
+        if obj.type == "LIGHT":
+            layout.prop(obj.detp_bake, "shadowmask", text="Shadowmask")
         if obj.type != "MESH":
             col = layout.column(align=True)
             kind = "instancer" if obj.instance_type != "NONE" else obj.type.lower()
