@@ -175,7 +175,8 @@ OPTIONS = (
            "shading (lightmap/sh.py)",
            choices=(("none", "None", "The plain lightmap only"),
                     ("sh", "SH L1", "The plain lightmap (L0) and, per colour channel, the cosine-weighted mean "
-                     "incoming direction (L1) in <object>.<estimator>.L1.exr"),
+                     "incoming direction (L1) in <object>.<estimator>.L1.exr and one RGB file per axis (.L1x, .L1y, "
+                     ".L1z.exr), shaded against normal maps by Apply"),
                     ("dominant", "Dominant Direction", "The plain lightmap and one luminance-weighted direction per "
                      "texel with its directionality in <object>.<estimator>.dir.exr"))),
     Option("shadowmask", tuple, (), "Shadowmask", f"Lights (up to {MAX_SHADOWMASK}) whose shadows go into "

@@ -147,6 +147,25 @@ def test_bake_operator_bakes_applies_and_reports(addon, cornell, bpy, tmp_path):
     assert "detp_bake lightmap" in cornell.objects["Floor"].material_slots[0].material.node_tree.nodes
 
 
+def test_a_directional_panel_bake_applies_the_sh_group_and_revert_removes_it(addon, cornell, bpy, tmp_path):
+    """Directional SH L1 from the panel: the bake's Apply and the Apply button (report.json's files)
+    wire the SH node group into the materials; Revert leaves no group and no L1 image behind."""
+    _small(cornell, tmp_path, directional="sh")
+    groups = sorted(g.name for g in bpy.data.node_groups)
+    assert bpy.ops.detp_bake.bake() == {"FINISHED"}
+    assert (tmp_path / "Floor.texel_histogram.L1x.exr").exists()
+    for _ in range(2):  # after the bake, then from the files on disk
+        nodes = cornell.objects["Floor"].material_slots[0].material.node_tree.nodes
+        group = next(n for n in nodes if n.type == "GROUP")
+        assert group.node_tree.name == "detp_bake SH" and group.parent.name == "detp_bake lightmap"
+        assert bpy.data.images["Floor.texel_histogram.L1x"].colorspace_settings.is_data
+        assert bpy.ops.detp_bake.revert() == {"FINISHED"}
+        assert sorted(g.name for g in bpy.data.node_groups) == groups
+        assert not any(i.name.endswith((".L1x", ".L1y", ".L1z")) for i in bpy.data.images)
+        assert bpy.ops.detp_bake.apply() == {"FINISHED"}
+    assert bpy.ops.detp_bake.revert() == {"FINISHED"}
+
+
 def test_bake_operator_refuses_bad_settings_before_work(addon, cornell, bpy, tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("")

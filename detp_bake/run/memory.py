@@ -49,6 +49,10 @@ DENOISE_PIXEL_BYTES = 14 * 12 + 12
 # per-texel value (36), and per pixel the raw, denoised and written images (3 × 36).
 DIRECTIONAL_BYTES = 2 * 72 + 2 * 36 + 36 + 3 * 36
 # --shadowmask: four float32 channels a texel (the visibility), its image and the dilated copy.
+# Measured (benchmarks/memory.py --directional sh [--shadowmask], 2048², 5 % gutter, OIDN): the
+# texel histogram peaks at 341 bytes a texel plain, 675 with sh, 373 with the shadowmask, 709 with
+# both (estimates 504, 948, 563, 1007); disc_index with both at 741 (estimate 1007). The L1 peak is
+# the clamp's float64 norms while the images are made; both figures stay as they are.
 SHADOWMASK_BYTES = 3 * 16
 MAX_BATCH_SEGMENTS = 4_000_000  # segments one batch may hold (160 MB of records per set)
 MIN_BATCH = 1000
