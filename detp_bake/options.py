@@ -178,7 +178,7 @@ OPTIONS = (
                      "incoming direction (L1) in <object>.<estimator>.L1.exr and one RGB file per axis (.L1x, .L1y, "
                      ".L1z.exr), shaded against normal maps by Apply"),
                     ("dominant", "Dominant Direction", "The plain lightmap and one luminance-weighted direction per "
-                     "texel with its directionality in <object>.<estimator>.dir.exr"))),
+                     "texel with its directionality in <object>.<estimator>.dir.exr (RGB and A)"))),
     Option("shadowmask", tuple, (), "Shadowmask", f"Lights (up to {MAX_SHADOWMASK}) whose shadows go into "
            "<object>.<estimator>.shadowmask.exr, one light per RGBA channel: the share of the light's unshadowed "
            "irradiance that arrives, from the shadow rays", metavar="LIGHT"),

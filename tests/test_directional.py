@@ -119,6 +119,9 @@ def test_dominant_direction_map():
     assert img.shape[1] == 4
     assert np.allclose(img[:, :3], towards, atol=1e-4)
     assert np.allclose(img[:, 3], 1.0, atol=1e-4)
+    l0 = result.images["Plate"][result.masks["Plate"]]  # what Apply shades it with: L1 back
+    assert np.allclose(sh.from_dominant(l0, img[:, :3], img[:, 3]), l0[:, :, None] * towards, atol=1e-4)
+    assert result.report()["directional"]["file_channels"] == ["R", "G", "B", "A"]
 
 
 def test_the_l1_file_and_its_channels(tmp_path):

@@ -158,28 +158,30 @@ def _sides(normals):
     return inside & (gain > 0.05), inside & (gain < -0.05)
 
 
-def _bake(bpy, tmp_path):
+def _bake(bpy, tmp_path, directional="sh"):
     sc = export(bpy, objects=["Wall"], uv_layer="UVMap", resolution=32)
-    return bake(sc, BakeSettings(photons=20_000, bounces=0, directional="sh"), tmp_path / "out").files["Wall"]
+    return bake(sc, BakeSettings(photons=20_000, bounces=0, directional=directional), tmp_path / "out").files["Wall"]
 
 
-@pytest.mark.parametrize("kind", ["bump", "normal_map"])
-def test_sh_lightmap_lights_the_bumps_from_the_suns_side_like_cycles(empty_blend, bpy, tmp_path, kind):
-    """Lit and shadowed sides of the bumps: the applied SH lightmap's mean is on the same side of
-    the flat value as Cycles' (real sun) and within 10 % of it (measured: within 2.5 %); the plain
-    lightmap shows no bumps; Revert leaves the file as it was (no node group, no image)."""
+@pytest.mark.parametrize("kind, directional", [("bump", "sh"), ("normal_map", "sh"), ("bump", "dominant")])
+def test_sh_lightmap_lights_the_bumps_from_the_suns_side_like_cycles(empty_blend, bpy, tmp_path, kind, directional):
+    """Lit and shadowed sides of the bumps: the applied SH (or dominant-direction) lightmap's mean is
+    on the same side of the flat value as Cycles' (real sun) and within 10 % of it (measured: within
+    2.5 %); the plain lightmap shows no bumps; Revert leaves the file as it was (no node group, no
+    image)."""
     scene, wall, mat = _wall(bpy, kind, 96)
     cycles = _render(bpy, scene, tmp_path / "cycles.exr")[..., 0]
     lit, dark = _sides(_shading_normals(bpy, scene, mat, tmp_path / "normals.exr"))
     assert lit.mean() > 0.05 and dark.mean() > 0.05, "the wall has no bumps to compare"
-    files = _bake(bpy, tmp_path)
+    files = _bake(bpy, tmp_path, directional)
     before = scene_snapshot(bpy), sorted(g.name for g in bpy.data.node_groups)
     shaded = _applied(bpy, scene, wall, files, tmp_path / "sh.exr")[..., 0]
     assert (scene_snapshot(bpy), sorted(g.name for g in bpy.data.node_groups)) == before
     plain = _applied(bpy, scene, wall, files[:1], tmp_path / "plain.exr")[..., 0]
     for side in (lit, dark):
         ours, theirs = shaded[side].mean(), cycles[side].mean()
-        print(f"{kind}: Cycles {theirs:.4f}, SH lightmap {ours:.4f}, plain {plain[side].mean():.4f}, flat {FLAT:.4f}")
+        print(f"{kind} {directional}: Cycles {theirs:.4f}, applied {ours:.4f}, plain {plain[side].mean():.4f}, "
+              f"flat {FLAT:.4f}")
         assert np.sign(ours - FLAT) == np.sign(theirs - FLAT)
         assert abs(ours / theirs - 1.0) < 0.10
     assert np.allclose(plain[lit | dark], FLAT, rtol=0.01)  # the plain lightmap: no bumps at all
@@ -219,18 +221,24 @@ def _figure(bpy, tmp_path):
     images.write_png(ROOT / "docs" / "images" / "directional_wall.png", np.concatenate([*views, cycles], axis=1))
 
 
-def test_apply_says_what_it_cannot_show_of_a_dominant_map_and_a_shadowmask(empty_blend, bpy, tmp_path):
-    """A dominant-direction map and a shadowmask are for engines: Apply shows the plain lightmap
-    (no SH group) and says so, naming what an engine does with the mask."""
+def test_apply_says_what_it_cannot_show_of_a_shadowmask_and_shades_a_dominant_map(empty_blend, bpy, tmp_path):
+    """A shadowmask is for engines: Apply shows the lightmap and says so, naming what an engine does
+    with the mask. The dominant map (R G B = direction, A = directionality: a file Blender loads)
+    goes through its own group, its alpha kept apart from the colour."""
     scene, wall, _ = _wall(bpy, "bump", 16)
     sc = export(bpy, objects=["Wall"], uv_layer="UVMap", resolution=16)
-    files = bake(sc, BakeSettings(photons=10_000, bounces=0, directional="dominant", shadowmask=("Sun",)),
-                 tmp_path).files["Wall"]
+    result = bake(sc, BakeSettings(photons=10_000, bounces=0, directional="dominant", shadowmask=("Sun",)), tmp_path)
+    files = result.files["Wall"]
+    written = images.read_image(files[1])
+    assert files[1].endswith(".dir.exr") and np.array_equal(written, result.l1_images["Wall"])
+    import OpenImageIO as oiio
+    assert tuple(oiio.ImageInput.open(files[1]).spec().channelnames) == ("R", "G", "B", "A")
     notes = []
     blender.apply_all(scene, {"Wall": files}, "UVMap", "texel_histogram", log=notes.append)
-    assert len(notes) == 2
-    assert any("--directional dominant" in n and "plain lightmap" in n for n in notes)
-    assert any("shadowmask" in n and "EEVEE takes no light nodes" in n and "times its channel" in n for n in notes)
+    assert len(notes) == 1 and "EEVEE takes no light nodes" in notes[0] and "times its channel" in notes[0]
     nodes = wall.material_slots[0].material.node_tree.nodes
-    assert not any(n.type == "GROUP" for n in nodes) and sh_nodes.GROUP not in bpy.data.node_groups
+    assert [n.node_tree.name for n in nodes if n.type == "GROUP"] == [sh_nodes.DOMINANT_GROUP]
+    image = bpy.data.images["Wall.texel_histogram.dir"]
+    assert image.alpha_mode == "CHANNEL_PACKED" and image.colorspace_settings.is_data
     assert blender.revert(wall)
+    assert not bpy.data.node_groups and "Wall.texel_histogram.dir" not in bpy.data.images

@@ -17,7 +17,7 @@ from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY, uses_nodes
 def load_image(path: str, name: str, sequence: bool = False, data: bool = False):
     """Load (or reload) a baked EXR as a linear image datablock named `name`; `sequence`: the
     first file of a numbered image sequence (<object>.<estimator>.<frame:04d>.exr); `data`: signed
-    numbers no colour transform may touch (a directional map)."""
+    numbers no colour transform may touch, alpha a channel of its own (a directional map)."""
     img = bpy.data.images.get(name)
     if img is not None and bpy.path.abspath(img.filepath) == path and (img.source == "SEQUENCE") == sequence:
         img.reload()
@@ -25,6 +25,8 @@ def load_image(path: str, name: str, sequence: bool = False, data: bool = False)
     img = bpy.data.images.load(path, check_existing=False)
     img.name = name
     img.colorspace_settings.is_data = data
+    if data:
+        img.alpha_mode = "CHANNEL_PACKED"  # the dominant map's directionality: not an opacity
     if sequence:
         img.source = "SEQUENCE"
     return img
@@ -204,18 +206,15 @@ def shared_materials(obj, objects) -> set:
 
 
 def _directional_images(paths: list, estimator: str, image_name: str, notes: set) -> Optional[dict]:
-    """A directional bake's per-axis L1 images among a lightmap's files (loaded), or None; what
-    Apply cannot show of a dominant-direction map or a shadowmask goes into `notes`."""
-    ends = {axis: f".{estimator}.{axis}.exr" for axis in sh.AXIS_FILES}
-    found = {axis: next((p for p in paths if p.endswith(end)), None) for axis, end in ends.items()}
-    if any(p.endswith(f".{estimator}.dir.exr") for p in paths):
-        notes.add("a dominant-direction map (--directional dominant) is for engines: Apply shows the plain "
-                  "lightmap; bake with --directional sh to see normal maps lit in EEVEE")
+    """A directional bake's images among a lightmap's files, loaded: {L1x, L1y, L1z: image} (sh),
+    {"dir": image} (dominant), or None; what Apply cannot show of a shadowmask goes into `notes`."""
     if any(p.endswith(f".{estimator}.shadowmask.exr") for p in paths):
         notes.add(SHADOWMASK_NOTE)
-    if not all(found.values()):
-        return None
-    return {axis: load_image(path, f"{image_name}.{estimator}.{axis}", data=True) for axis, path in found.items()}
+    for names in (sh.AXIS_FILES, ("dir",)):
+        found = {n: next((p for p in paths if p.endswith(f".{estimator}.{n}.exr")), None) for n in names}
+        if all(found.values()):
+            return {n: load_image(path, f"{image_name}.{estimator}.{n}", data=True) for n, path in found.items()}
+    return None
 
 
 SHADOWMASK_NOTE = (
@@ -234,8 +233,8 @@ def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional
     object name to the object to apply it to (default: the scene's object of that name);
     `copy_materials` gives each object its own material copies even when nobody shares them.
     `frames` (first, last): `files` are the first frame's of a range baked at every frame, shown as
-    image sequences that follow the timeline. A directional (sh) bake's L1 files are shaded against
-    each material's normal; `log` hears what Apply cannot show (a dominant map, a shadowmask)."""
+    image sequences that follow the timeline. A directional bake's maps (sh or dominant) are shaded
+    against each material's normal; `log` hears what Apply cannot show (a shadowmask)."""
     targets, lightmap = {}, lightmap_of(bl_scene, files)  # an atlas goes to each of its objects
     for name in lightmap:
         obj = (objects or {}).get(name) or bl_scene.objects.get(name)

@@ -1,9 +1,11 @@
 """Directional lightmaps in EEVEE: the node groups that evaluate lightmap/sh.py's `shade` against a
 material's shading normal, so a normal map is lit from the side the light came from.
 
-Two groups, made once per file and tagged as ours: "detp_bake SH channel" is `sh.shade` for one
-colour channel (L0 a float, L1 a vector), node for node the numpy formula; "detp_bake SH" splits
-the L0 and per-axis L1 colours into channels, runs the channel group on each and joins them.
+Groups made once per file and tagged as ours: "detp_bake SH channel" is `sh.shade` for one colour
+channel (L0 a float, L1 a vector), node for node the numpy formula; "detp_bake SH" splits the L0
+and per-axis L1 colours into channels, runs the channel group on each and joins them; "detp_bake
+dominant" does the same with each channel's L1 rebuilt from a dominant-direction map
+(`sh.from_dominant`: the direction times L0 times the directionality).
 Normals are world space, as L1 is (Geometry › Normal and a Normal Map node's output both are).
 Revert removes a group when nothing uses it any more (`remove_unused`)."""
 from __future__ import annotations
@@ -13,6 +15,7 @@ import bpy
 from ..lightmap import sh
 
 GROUP = "detp_bake SH"
+DOMINANT_GROUP = "detp_bake dominant"
 CHANNEL_GROUP = "detp_bake SH channel"
 TAG = "detp_bake_sh"  # custom property: a group this module made (its formula's version)
 VERSION = 1
@@ -109,6 +112,28 @@ def _sh_group():
     return ng
 
 
+def _dominant_group():
+    """L0, the dominant direction (a colour: x, y, z) and its directionality → the shaded colour."""
+    ng, i, o = _new_group(DOMINANT_GROUP, [("L0", "NodeSocketColor"), ("Direction", "NodeSocketColor"),
+                                           ("Directionality", "NodeSocketFloat"), ("Normal", "NodeSocketVector"),
+                                           ("Shading", "NodeSocketVector")], [("Color", "NodeSocketColor")])
+    channel = _group(CHANNEL_GROUP, _channel_group)
+    split = ng.nodes.new("ShaderNodeSeparateColor")
+    ng.links.new(i["L0"], split.inputs[0])
+    join = ng.nodes.new("ShaderNodeCombineColor")
+    for c in range(3):
+        node = ng.nodes.new("ShaderNodeGroup")
+        node.node_tree = channel
+        l1 = _vmath(ng, "SCALE", i["Direction"], scale=_math(ng, "MULTIPLY", split.outputs[c], i["Directionality"]))
+        ng.links.new(split.outputs[c], node.inputs["L0"])
+        ng.links.new(l1, node.inputs["L1"])
+        ng.links.new(i["Normal"], node.inputs["Normal"])
+        ng.links.new(i["Shading"], node.inputs["Shading"])
+        ng.links.new(node.outputs[0], join.inputs[c])
+    ng.links.new(join.outputs[0], o["Color"])
+    return ng
+
+
 def _group(name: str, make):
     """Our group of that name (this version), made when missing."""
     for ng in bpy.data.node_groups:
@@ -118,20 +143,24 @@ def _group(name: str, make):
 
 
 def wire(nt, frame, l0_socket, l1_images: dict, uv_socket, shading, x: float):
-    """Add to material tree `nt` (under `frame`) the L1 textures and the SH group fed by the
-    lightmap's colour `l0_socket` and the shading normal `shading` (a socket, None: the surface's
-    own normal); returns the group's colour output."""
+    """Add to material tree `nt` (under `frame`) the directional textures (`l1_images`: {L1x, L1y,
+    L1z: image}, or {"dir": the dominant map}) and their group, fed by the lightmap's colour
+    `l0_socket` and the shading normal `shading` (a socket, None: the surface's own normal);
+    returns the group's colour output."""
     geometry = nt.nodes.new("ShaderNodeNewGeometry")
     group = nt.nodes.new("ShaderNodeGroup")
-    group.node_tree = _group(GROUP, _sh_group)
-    group.label = "Directional lightmap (SH L1)"
+    dominant = "dir" in l1_images
+    group.node_tree = _group(DOMINANT_GROUP, _dominant_group) if dominant else _group(GROUP, _sh_group)
+    group.label = "Directional lightmap (" + ("dominant direction)" if dominant else "SH L1)")
     nt.links.new(l0_socket, group.inputs["L0"])
     for k, (axis, image) in enumerate(l1_images.items()):
         tex = nt.nodes.new("ShaderNodeTexImage")
         tex.image, tex.interpolation = image, "Linear"
         tex.parent, tex.location = frame, (x, -700.0 - 280.0 * k)
         nt.links.new(uv_socket, tex.inputs["Vector"])
-        nt.links.new(tex.outputs["Color"], group.inputs[axis])
+        nt.links.new(tex.outputs["Color"], group.inputs["Direction" if dominant else axis])
+        if dominant:
+            nt.links.new(tex.outputs["Alpha"], group.inputs["Directionality"])
     nt.links.new(geometry.outputs["Normal"], group.inputs["Normal"])
     nt.links.new(shading if shading is not None else geometry.outputs["Normal"], group.inputs["Shading"])
     geometry.parent, geometry.location = frame, (x, -1540.0)
@@ -141,7 +170,7 @@ def wire(nt, frame, l0_socket, l1_images: dict, uv_socket, shading, x: float):
 
 def remove_unused() -> None:
     """Remove our groups nothing uses any more (the SH group first: it uses the channel group)."""
-    for name in (GROUP, CHANNEL_GROUP):
+    for name in (GROUP, DOMINANT_GROUP, CHANNEL_GROUP):
         for ng in [g for g in bpy.data.node_groups if g.name.split(".")[0] == name and TAG in g]:
             if ng.users == 0:
                 bpy.data.node_groups.remove(ng)

@@ -96,6 +96,13 @@ def shade(l0: np.ndarray, l1: np.ndarray, normal: np.ndarray, shading: np.ndarra
     return l0 * (a * towards + (1.0 - a) * sky)
 
 
+def from_dominant(l0: np.ndarray, direction: np.ndarray, share: np.ndarray) -> np.ndarray:
+    """L1 (..., 3 colours, 3 axes) as a dominant-direction map gives it back: every colour channel
+    from the one `direction` (..., 3) with the one directionality `share` (...), L0 (..., 3). What
+    Apply shades a `dominant` bake with; exact where the light comes from one direction."""
+    return l0[..., :, None] * share[..., None, None] * direction[..., None, :]
+
+
 def dominant(l0: np.ndarray, l1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The `dominant` mode's map from L0 (N, 3) and L1 (N, 3, 3): the luminance-weighted L1 as a
     unit world-space direction (N, 3) and its directionality |L1_lum|/L0_lum in [0, 1] (N,)."""

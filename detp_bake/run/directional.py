@@ -100,6 +100,8 @@ def make_images(result, l1, regions=None, fragments_of=None, sharp=None) -> None
     result.directional = {"mode": settings.directional, "denoised": bool(denoise), "clamped_texels": clamped,
                           "channels": list(sh.L1_CHANNELS if settings.directional == "sh" else sh.DOMINANT_CHANNELS),
                           "suffix": suffix(settings.directional),
+                          # the file's own channel names: sh's by name, dominant's R G B A (engines, Blender)
+                          "file_channels": list(sh.L1_CHANNELS if settings.directional == "sh" else "RGBA"),
                           **({"axis_files": list(sh.AXIS_FILES)} if settings.directional == "sh" else {})}
 
 

@@ -81,7 +81,7 @@ class BakeResult:
         lightmap: <object>.<estimator>.<suffix>.exr (writing.py)."""
         out = []
         if self.l1_images:
-            out.append((self.directional["suffix"], self.l1_images, self.directional["channels"]))
+            out.append((self.directional["suffix"], self.l1_images, self.directional.get("file_channels")))
             for a, axis in enumerate(self.directional.get("axis_files", [])):  # RGB, for Blender and engines
                 out.append((axis, {name: img[..., 3 * a:3 * a + 3] for name, img in self.l1_images.items()}, None))
         if self.shadowmask_images:
