@@ -2,6 +2,7 @@
 
     python benchmarks/memory.py [--resolution 2048] [--estimators disc_index,sphere_cache,...]
                                 [--photons 20000] [--no-denoise] [--gutter 0.05] [--json OUT]
+                                [--directional none|sh|dominant] [--shadowmask]
 
 Each bake runs in a fresh process (its peak resident memory is its own): once at 32² and once at
 --resolution, on a floor under a ceiling lit by a point light (one baked lightmap whose UVs fill
@@ -10,7 +11,8 @@ the square but a --gutter, 5 %: texels are then 0.81 of the pixels). Bytes per t
 out; the estimate's bytes per texel are taken the same way. A sampler thread also records which
 phase of the bake (rasterise, direct, clearance, rise, build, trace+estimate, images, denoise) held
 the peak, and the line the main thread was on. Prints a table, writes JSON
-(default benchmarks/results/memory.json).
+(default benchmarks/results/memory.json). --directional and --shadowmask (the lamp's) bake those maps
+too: their parts of the estimate count with the texels'.
 """
 from __future__ import annotations
 
@@ -56,7 +58,8 @@ def _scene(resolution: int, gutter: float = 0.05):
                  world=np.zeros(3), default_bounces=2)
 
 
-def _child(estimator: str, resolution: int, photons: int, denoise: bool, gutter: float) -> dict:
+def _child(estimator: str, resolution: int, photons: int, denoise: bool, gutter: float,
+           directional: str = "none", shadowmask: bool = False) -> dict:
     from detp_bake.run import bake, memory
     from detp_bake.lightmap import denoise as denoise_mod, texels
     from detp_bake.transport import direct
@@ -110,7 +113,8 @@ def _child(estimator: str, resolution: int, photons: int, denoise: bool, gutter:
 
     # Every texel a site (sites.py): the most an estimator can hold, which the estimate assumes.
     settings = bake.BakeSettings(estimator=estimator, photons=photons, resolution=resolution, seed=1,
-                                 denoise=denoise, indirect_spacing=1)
+                                 denoise=denoise, indirect_spacing=1, directional=directional,
+                                 shadowmask=("Lamp",) if shadowmask else ())
     watcher = threading.Thread(target=sample, daemon=True)
     watcher.start()
     t0 = time.perf_counter()
@@ -119,31 +123,36 @@ def _child(estimator: str, resolution: int, photons: int, denoise: bool, gutter:
     done.set()
     watcher.join()
     parts = r.memory["parts_mb"]
-    texel_mb = sum(v for k, v in parts.items() if k in ("texels", "lightmap images", "denoiser")
+    texel_mb = sum(v for k, v in parts.items() if k in ("texels", "lightmap images", "denoiser",
+                                                          "directional maps", "shadowmask")
                    or k.startswith("estimator"))
     return {"estimator": estimator, "resolution": resolution, "texels": len(r.texels), "peak": memory.peak_bytes(),
             "estimate": r.memory["estimate_mb"] * 1e6, "estimate_texels": texel_mb * 1e6,
             "phases": peaks, "seconds": seconds, "peak_at": where[1], "segments": r.stats.segments}
 
 
-def _run_child(estimator: str, resolution: int, photons: int, denoise: bool, gutter: float) -> dict:
+def _run_child(estimator: str, resolution: int, photons: int, denoise: bool, gutter: float,
+               directional: str = "none", shadowmask: bool = False) -> dict:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     proc = subprocess.run([sys.executable, __file__, "--child", estimator, str(resolution), str(photons),
-                           str(int(denoise)), str(gutter)],
+                           str(int(denoise)), str(gutter), directional, str(int(shadowmask))],
                           capture_output=True, text=True, env=env, cwd=ROOT)
     if proc.returncode != 0:
         raise SystemExit(f"{estimator} at {resolution}: failed\n{proc.stdout[-2000:]}{proc.stderr[-3000:]}")
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def measure(estimator: str, resolution: int, photons: int, denoise: bool = True, gutter: float = 0.05) -> dict:
+def measure(estimator: str, resolution: int, photons: int, denoise: bool = True, gutter: float = 0.05,
+            directional: str = "none", shadowmask: bool = False) -> dict:
     """Bytes per texel of `estimator`: estimated and measured, from a tiny and a large bake."""
-    _run_child(estimator, TINY, photons, denoise, gutter)  # warms the kernel cache
-    small = _run_child(estimator, TINY, photons, denoise, gutter)
-    large = _run_child(estimator, resolution, photons, denoise, gutter)
+    extra = (directional, shadowmask)
+    _run_child(estimator, TINY, photons, denoise, gutter, *extra)  # warms the kernel cache
+    small = _run_child(estimator, TINY, photons, denoise, gutter, *extra)
+    large = _run_child(estimator, resolution, photons, denoise, gutter, *extra)
     texels = large["texels"] - small["texels"]
     peak_phase = max(large["phases"], key=large["phases"].get)
     return {"estimator": estimator, "resolution": resolution, "texels": large["texels"],
+            "directional": directional, "shadowmask": shadowmask,
             "coverage": large["texels"] / resolution ** 2,
             "estimate_per_texel": (large["estimate_texels"] - small["estimate_texels"]) / texels,
             "measured_per_texel": (large["peak"] - small["peak"]) / texels,
@@ -161,18 +170,21 @@ def main(argv=None):
     ap.add_argument("--json", default=str(ROOT / "benchmarks" / "results" / "memory.json"))
     ap.add_argument("--no-denoise", action="store_true", help="bake without OIDN")
     ap.add_argument("--gutter", type=float, default=0.05, help="UV inset of the lightmap (0: no gutter)")
-    ap.add_argument("--child", nargs=5, help=argparse.SUPPRESS)
+    ap.add_argument("--directional", default="none", choices=["none", "sh", "dominant"],
+                    help="also bake directional maps (their estimate counts per texel)")
+    ap.add_argument("--shadowmask", action="store_true", help="also bake the lamp's shadowmask")
+    ap.add_argument("--child", nargs=7, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
-        print(json.dumps(_child(args.child[0], int(args.child[1]), int(args.child[2]), bool(int(args.child[3])),
-                                float(args.child[4]))))
+        c = args.child
+        print(json.dumps(_child(c[0], int(c[1]), int(c[2]), bool(int(c[3])), float(c[4]), c[5], bool(int(c[6])))))
         return
     rows = []
     print(f"{'estimator':<13} {'texels':>10} {'estimate B/texel':>17} {'measured B/texel':>17} {'ratio':>6} "
           f"{'peak MB':>8}  peak phase, where")
     for name in args.estimators.split(","):
         row = measure(name, args.resolution, min(args.photons, PHOTONS.get(name, args.photons)), not args.no_denoise,
-                      args.gutter)
+                      args.gutter, args.directional, args.shadowmask)
         rows.append(row)
         print(f"{name:<13} {row['texels']:>10,} {row['estimate_per_texel']:>17.0f} {row['measured_per_texel']:>17.0f} "
               f"{row['estimate_per_texel'] / row['measured_per_texel']:>6.2f} {row['peak_mb']:>8.0f}  "
@@ -180,7 +192,9 @@ def main(argv=None):
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"resolution": args.resolution, "photons": args.photons, "cores": os.cpu_count(),
-                               "denoise": not args.no_denoise, "gutter": args.gutter, "results": rows}, indent=2))
+                               "denoise": not args.no_denoise, "gutter": args.gutter,
+                               "directional": args.directional, "shadowmask": args.shadowmask, "results": rows},
+                              indent=2))
     print(f"wrote {out}")
 
 

@@ -32,6 +32,7 @@ DIRECT_MODES = ("sampled", "photons")
 RADIUS_TEXELS_INDIRECT = 3.0
 RADIUS_TEXELS_ALL = 1.5
 KERNELS = ("constant", "epanechnikov")
+MAX_SHADOWMASK = 4  # lights in one shadowmask: the RGBA channels
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,10 @@ class Option:
         Optional field, a float to seven significant digits."""
         if self.auto is not None and value == self.auto and self.name in OPTIONAL:
             return None
+        if self.kind is tuple:  # names: a list (command line, the panel's toggles) or comma-separated text
+            if isinstance(value, str):
+                value = [v.strip() for v in value.split(",")]
+            return tuple(v for v in (value or ()) if v)
         if self.kind is float and isinstance(value, float):
             # Blender keeps a float property in single precision (0.65 reads 0.6499999761581421):
             # seven digits give the panel and the command line the same number.
@@ -77,6 +82,12 @@ class Option:
     def check(self, value) -> Optional[str]:
         """Why `value` (as the core reads it) cannot work, or None."""
         if value is None and self.name in OPTIONAL:
+            return None
+        if self.kind is tuple:
+            if not isinstance(value, (tuple, list)) or not all(isinstance(v, str) and v for v in value):
+                return "must be a list of names"
+            if len(set(value)) != len(value) or len(value) > MAX_SHADOWMASK:
+                return f"must name at most {MAX_SHADOWMASK} different lights (one per RGBA channel)"
             return None
         if self.choices:
             names = [c[0] for c in self.choice_list]
@@ -160,6 +171,22 @@ OPTIONS = (
                      "density and placed on its own"),
                     ("smart", "Smart UV", "New islands from Blender's Smart UV Project (fewer seams), placed on "
                      "their own"))),
+    Option("directional", str, "none", "Directional", "Also bake where the light comes from, for normal-mapped "
+           "shading (lightmap/sh.py)",
+           choices=(("none", "None", "The plain lightmap only"),
+                    ("sh", "SH L1", "The plain lightmap (L0) and, per colour channel, the cosine-weighted mean "
+                     "incoming direction (L1) in <object>.<estimator>.L1.exr and one RGB file per axis (.L1x, .L1y, "
+                     ".L1z.exr), shaded against normal maps by Apply"),
+                    ("dominant", "Dominant Direction", "The plain lightmap and one luminance-weighted direction per "
+                     "texel with its directionality in <object>.<estimator>.dir.exr (RGB and A)"))),
+    Option("shadowmask", tuple, (), "Shadowmask", f"Lights (up to {MAX_SHADOWMASK}) whose shadows go into "
+           "<object>.<estimator>.shadowmask.exr, one light per RGBA channel: the share of the light's unshadowed "
+           "irradiance that arrives, from the shadow rays", metavar="LIGHT"),
+    Option("shadowmask_mode", str, "subtract", "Shadowmask Mode", "What the lightmap keeps of a shadow-masked light",
+           choices=(("subtract", "Subtract", "Its direct light is left out of the lightmap (its bounced light stays): "
+                     "the real light times the mask adds it at render time"),
+                    ("overlay", "Overlay", "Its direct light stays in the lightmap too; the mask only says where its "
+                     "shadows are (to darken dynamic objects' light there)"))),
     Option("margin", int, 16, "Margin", "Pixels of dilation around the UV charts, against seams under filtering",
            minimum=0, maximum=MAX_MARGIN),
     Option("threads", int, 0, "Threads", "Threads for tracing and estimation (0: all cores)", minimum=0,

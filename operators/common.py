@@ -31,6 +31,7 @@ def bake_settings(context, estimator=None) -> BakeSettings:
     s = context.scene.detp_bake
     prefs = preferences(context)
     choices = {o.name: getattr(s, o.name) for o in options.OPTIONS if hasattr(s, o.name)}
+    choices["shadowmask"] = shadowmask_lights(context.scene)
     choices["threads"] = s.threads or (prefs.threads if prefs is not None else 0)
     choices["memory_budget_mb"] = prefs.memory_budget if prefs is not None else options.default("memory_budget_mb")
     if estimator:
@@ -40,6 +41,12 @@ def bake_settings(context, estimator=None) -> BakeSettings:
     if s.direct != "sampled":
         choices["indirect_spacing"] = options.BY_NAME["indirect_spacing"].auto
     return BakeSettings.from_choices(choices, formats=tuple(f.lower() for f in sorted(s.formats)) or ("exr",))
+
+
+def shadowmask_lights(scene) -> tuple:
+    """The names of the scene's lights whose Shadowmask toggle is on, in name order (the mask's
+    channel order): the command line's --shadowmask list."""
+    return tuple(sorted(o.name for o in scene.objects if o.type == "LIGHT" and o.detp_bake.shadowmask))
 
 
 def output_directory(context) -> str:

@@ -159,7 +159,8 @@ class BakeJob(BlenderJob):
         s = scene.detp_bake
         if s.apply_after_bake and "exr" in self.settings.formats:
             uv = common.uv_layers([scene.objects[n] for n in self.objects if n in scene.objects])
-            blender.apply_all(scene, files, uv, self.settings.estimator)
+            blender.apply_all(scene, files, uv, self.settings.estimator,
+                              log=lambda note: report({"WARNING"}, note))
         kept = (f"; {len(reused)} unchanged since the last bake, kept (Rebake All bakes them again)"
                 if reused else "")
         for warning in self.warnings:

@@ -50,7 +50,8 @@ class DETPBAKE_OT_apply(bpy.types.Operator):
             self.report({"ERROR"}, f"no {estimator} lightmaps in {common.output_directory(context)}: bake first")
             return {"CANCELLED"}
         try:
-            blender.apply_all(context.scene, files, common.uv_layers(objects), estimator)
+            blender.apply_all(context.scene, files, common.uv_layers(objects), estimator,
+                              log=lambda note: self.report({"WARNING"}, note))
         except BakeError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}

@@ -147,6 +147,25 @@ def test_bake_operator_bakes_applies_and_reports(addon, cornell, bpy, tmp_path):
     assert "detp_bake lightmap" in cornell.objects["Floor"].material_slots[0].material.node_tree.nodes
 
 
+def test_a_directional_panel_bake_applies_the_sh_group_and_revert_removes_it(addon, cornell, bpy, tmp_path):
+    """Directional SH L1 from the panel: the bake's Apply and the Apply button (report.json's files)
+    wire the SH node group into the materials; Revert leaves no group and no L1 image behind."""
+    _small(cornell, tmp_path, directional="sh")
+    groups = sorted(g.name for g in bpy.data.node_groups)
+    assert bpy.ops.detp_bake.bake() == {"FINISHED"}
+    assert (tmp_path / "Floor.texel_histogram.L1x.exr").exists()
+    for _ in range(2):  # after the bake, then from the files on disk
+        nodes = cornell.objects["Floor"].material_slots[0].material.node_tree.nodes
+        group = next(n for n in nodes if n.type == "GROUP")
+        assert group.node_tree.name == "detp_bake SH" and group.parent.name == "detp_bake lightmap"
+        assert bpy.data.images["Floor.texel_histogram.L1x"].colorspace_settings.is_data
+        assert bpy.ops.detp_bake.revert() == {"FINISHED"}
+        assert sorted(g.name for g in bpy.data.node_groups) == groups
+        assert not any(i.name.endswith((".L1x", ".L1y", ".L1z")) for i in bpy.data.images)
+        assert bpy.ops.detp_bake.apply() == {"FINISHED"}
+    assert bpy.ops.detp_bake.revert() == {"FINISHED"}
+
+
 def test_bake_operator_refuses_bad_settings_before_work(addon, cornell, bpy, tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("")
@@ -411,10 +430,32 @@ def test_the_panel_and_the_command_line_build_the_same_settings(addon, cornell, 
     assert panel == line
     if not choices:
         assert panel == BakeSettings() and panel.estimator_settings.radius_texels is None
-    # Every setting is on the panel, but the memory budget, which is a preference of the machine.
-    assert {o.name for o in options.OPTIONS if not hasattr(s, o.name)} == {"memory_budget_mb"}
+    # Every setting is on the scene's panel, but the memory budget, which is a preference of the
+    # machine, and the shadowmask, a toggle on each light (the next test).
+    assert {o.name for o in options.OPTIONS if not hasattr(s, o.name)} == {"memory_budget_mb", "shadowmask"}
     for name in choices:  # reset for the next case
         s.property_unset(name)
+
+
+def test_the_lights_shadowmask_toggles_are_the_command_lines_list(addon, cornell, bpy):
+    """One Shadowmask toggle per light (object.detp_bake.shadowmask): the lights switched on, in
+    name order, are the command line's --shadowmask list; none on, none masked."""
+    from detp_bake import cli
+
+    common = sys.modules[f"{PACKAGE}.operators.common"]
+    sun = bpy.data.objects.new("A Sun", bpy.data.lights.new("A Sun", "SUN"))
+    cornell.collection.objects.link(sun)
+    lamp = next(o for o in cornell.objects if o.type == "LIGHT" and o is not sun)
+    assert common.bake_settings(bpy.context).shadowmask == ()
+    for light in (lamp, sun):
+        light.detp_bake.shadowmask = True
+    cornell.detp_bake.shadowmask_mode = "overlay"
+    panel = common.bake_settings(bpy.context)
+    line = cli.settings_from_args(cli.build_parser().parse_args(
+        ["bake", "x.blend", "--out", "o", "--shadowmask", "A Sun", lamp.name, "--shadowmask-mode", "overlay"]))
+    assert panel == line and panel.shadowmask == ("A Sun", lamp.name)
+    lamp.detp_bake.shadowmask = False
+    assert common.bake_settings(bpy.context).shadowmask == ("A Sun",)
 
 
 def test_a_second_panel_bake_keeps_unchanged_lightmaps_and_rebake_all_bakes_them(addon, cornell, bpy, tmp_path):

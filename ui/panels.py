@@ -139,6 +139,16 @@ class DETPBAKE_PT_lightmaps(_Panel, bpy.types.Panel):
             layout.prop(s, "resolution_mode")
             layout.prop(s, "resolution" if s.resolution_mode == "FIXED" else "texel_density")
         layout.prop(s, "margin")
+        layout.prop(s, "directional")
+        lights = sorted((o for o in context.scene.objects if o.type == "LIGHT"), key=lambda o: o.name)
+        col = layout.column(heading="Shadowmask", align=True)
+        for light in lights:  # one toggle per light: the command line's --shadowmask list
+            col.prop(light.detp_bake, "shadowmask", text=light.name)
+        if not lights:
+            col.label(text="No lights in the scene")
+        row = layout.row()
+        row.active = any(light.detp_bake.shadowmask for light in lights)
+        row.prop(s, "shadowmask_mode")
         layout.prop(s, "output_directory")
         layout.prop(s, "formats")
         layout.prop(s, "apply_after_bake")
@@ -160,6 +170,8 @@ class DETPBAKE_PT_object(_Panel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         obj = context.active_object
+        if obj.type == "LIGHT":
+            layout.prop(obj.detp_bake, "shadowmask", text="Shadowmask")
         if obj.type != "MESH":
             col = layout.column(align=True)
             kind = "instancer" if obj.instance_type != "NONE" else obj.type.lower()

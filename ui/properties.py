@@ -62,6 +62,9 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
     atlas_padding: _option("atlas_padding")
     atlas_charts: _option("atlas_charts")
     margin: _option("margin")
+    directional: _option("directional")
+    # The shadowmask's lights: a toggle on each light object (DETPBakeObjectSettings.shadowmask)
+    shadowmask_mode: _option("shadowmask_mode")
     output_directory: StringProperty(name="Output", default="//lightmaps/", subtype="DIR_PATH",
                                      description="Folder for the lightmap files (// is the .blend's folder)")
     formats: EnumProperty(name="Formats", options={"ENUM_FLAG"}, default={f.upper() for f in bake.BakeSettings.formats},
@@ -101,6 +104,10 @@ class DETPBakeObjectSettings(bpy.types.PropertyGroup):
                             description="This object's lightmap size (0: use the scene setting)")
     density_scale: FloatProperty(name="Density Scale", default=1.0, min=0.01, soft_max=16.0,
                                  description="Atlases: this object's texels per metre, times the scene's")
+    # Lights: one channel of the shadowmask (options.py's `shadowmask` list, read by bake_settings)
+    shadowmask: BoolProperty(name=options.BY_NAME["shadowmask"].label, default=False,
+                             description=f"Lights: this light's shadows go into the shadowmask, one RGBA channel each "
+                                         f"(up to {options.MAX_SHADOWMASK} lights, in name order)")
     uv_layer: StringProperty(name="Lightmap UV", default=options.UV_LAYER,
                              description="UV layer that holds this object's lightmap charts")
     motion: EnumProperty(name="Motion", default="AUTO",

@@ -3,48 +3,58 @@ frame, and undo exactly that (`revert`), recorded on the object."""
 from __future__ import annotations
 
 import json
-from typing import Optional
+from typing import Callable, Optional
 
 import bpy
 
 from ..errors import BakeError
+from ..lightmap import sh
+from . import sh_nodes
 from .atlas import ATLAS_UV, lightmap_of
 from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY, uses_nodes
 
 
-def load_image(path: str, name: str, sequence: bool = False):
+def load_image(path: str, name: str, sequence: bool = False, data: bool = False):
     """Load (or reload) a baked EXR as a linear image datablock named `name`; `sequence`: the
-    first file of a numbered image sequence (<object>.<estimator>.<frame:04d>.exr)."""
+    first file of a numbered image sequence (<object>.<estimator>.<frame:04d>.exr); `data`: signed
+    numbers no colour transform may touch, alpha a channel of its own (a directional map)."""
     img = bpy.data.images.get(name)
     if img is not None and bpy.path.abspath(img.filepath) == path and (img.source == "SEQUENCE") == sequence:
         img.reload()
         return img
     img = bpy.data.images.load(path, check_existing=False)
     img.name = name
-    img.colorspace_settings.is_data = False
+    img.colorspace_settings.is_data = data
+    if data:
+        img.alpha_mode = "CHANNEL_PACKED"  # the dominant map's directionality: not an opacity
     if sequence:
         img.source = "SEQUENCE"
     return img
 
 
 def _base_colour_source(nt):
-    """The socket or constant feeding the surface's base colour."""
+    """The socket or constant feeding the surface's base colour, and the socket feeding its
+    normal (a Normal Map or Bump node; None: the surface's own normal)."""
     for node in nt.nodes:
         if node.type in ("BSDF_PRINCIPLED", "BSDF_DIFFUSE"):
             sock = node.inputs["Base Color" if node.type == "BSDF_PRINCIPLED" else "Color"]
+            normal = node.inputs["Normal"]
+            normal = normal.links[0].from_socket if normal.is_linked else None
             if sock.is_linked:
-                return sock.links[0].from_socket, None
-            return None, tuple(sock.default_value)
-    return None, (0.8, 0.8, 0.8, 1.0)
+                return sock.links[0].from_socket, None, normal
+            return None, tuple(sock.default_value), normal
+    return None, (0.8, 0.8, 0.8, 1.0), None
 
 
-def _wire(mat, image, uv_name: str, frames: Optional[tuple] = None) -> None:
+def _wire(mat, image, uv_name: str, frames: Optional[tuple] = None, l1: Optional[dict] = None) -> None:
     """Add the lightmap frame: UV Map → Image × base colour → Emission → an EEVEE output made
     active, so the viewport shows the baked lighting while Cycles keeps the original shading.
-    `frames` (first, last): the image is a sequence whose file numbers are the scene's frames."""
+    `frames` (first, last): the image is a sequence whose file numbers are the scene's frames.
+    `l1` ({L1x, L1y, L1z: image}): a directional lightmap, shaded by the SH group (sh_nodes.py)
+    against the material's normal before the multiply."""
     nt = mat.node_tree
     previous = [n.name for n in nt.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output]
-    src, const = _base_colour_source(nt)
+    src, const, normal = _base_colour_source(nt)
     frame = nt.nodes.new("NodeFrame")
     frame.name = frame.label = FRAME_NAME
     x0 = max((n.location.x for n in nt.nodes if n is not frame), default=0.0) + 300.0
@@ -78,7 +88,10 @@ def _wire(mat, image, uv_name: str, frames: Optional[tuple] = None) -> None:
         nt.links.new(src, a)
     else:
         a.default_value = const
-    nt.links.new(tex.outputs["Color"], b)
+    light = tex.outputs["Color"]
+    if l1:
+        light = sh_nodes.wire(nt, frame, light, l1, uv.outputs["UV"], normal, x0 + 250.0)
+    nt.links.new(light, b)
     nt.links.new(mix.outputs[2], emit.inputs["Color"])
     nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
     out.is_active_output = True
@@ -93,6 +106,7 @@ def unwire(mat) -> None:
         for node in [n for n in nt.nodes if n.parent == frame]:
             nt.nodes.remove(node)
         nt.nodes.remove(frame)
+        sh_nodes.remove_unused()
     state = json.loads(mat.get(REVERT_KEY, "{}"))
     for name in state.get("active_outputs", []):
         node = nt.nodes.get(name)
@@ -108,14 +122,15 @@ def _use_nodes(mat) -> None:
         mat.use_nodes = True
 
 
-def apply_lightmap(obj, image, uv_name: str, shared: bool = False, frames: Optional[tuple] = None) -> None:
+def apply_lightmap(obj, image, uv_name: str, shared: bool = False, frames: Optional[tuple] = None,
+                   l1: Optional[dict] = None) -> None:
     """Show `image` on `obj`'s materials. A material other baked objects also use is copied for
     this object (`shared`), and so is every material of a mesh other objects share (the copy goes
     in an object-level slot, so the other objects keep theirs); an empty slot gets a new material.
-    All of it is undone by `revert`."""
+    `l1` ({L1x, L1y, L1z: image}): shade it as a directional lightmap. All of it is undone by `revert`."""
     if REVERT_KEY in obj:
         raise BakeError(f"object '{obj.name}' already shows a lightmap: revert it first")
-    record = {"slots": [], "added_slots": 0, "image": image.name}
+    record = {"slots": [], "added_slots": 0, "image": image.name, "l1_images": [i.name for i in (l1 or {}).values()]}
     if not obj.material_slots:
         obj.data.materials.append(None)
         record["added_slots"] = 1
@@ -144,7 +159,7 @@ def apply_lightmap(obj, image, uv_name: str, shared: bool = False, frames: Optio
             mat = original
         record["slots"].append(entry)
         if mat.node_tree.nodes.get(FRAME_NAME) is None:
-            _wire(mat, image, uv_name, frames)
+            _wire(mat, image, uv_name, frames, l1)
     obj[REVERT_KEY] = json.dumps(record)
 
 
@@ -177,9 +192,11 @@ def revert(obj) -> bool:
         for _ in range(added):
             obj.data.materials.pop()
     del obj[REVERT_KEY]
-    img = bpy.data.images.get(record.get("image", ""))
-    if img is not None and img.users == 0:
-        bpy.data.images.remove(img)
+    sh_nodes.remove_unused()  # a removed copy may have been the last user of the SH group
+    for name in [record.get("image", ""), *record.get("l1_images", [])]:
+        img = bpy.data.images.get(name)
+        if img is not None and img.users == 0:
+            bpy.data.images.remove(img)
     return True
 
 
@@ -189,19 +206,42 @@ def shared_materials(obj, objects) -> set:
     return {s.material.name for s in obj.material_slots if s.material and s.material.name in others}
 
 
+def _directional_images(paths: list, estimator: str, image_name: str, notes: set) -> Optional[dict]:
+    """A directional bake's images among a lightmap's files, loaded: {L1x, L1y, L1z: image} (sh),
+    {"dir": image} (dominant), or None; what Apply cannot show of a shadowmask goes into `notes`."""
+    if any(p.endswith(f".{estimator}.shadowmask.exr") for p in paths):
+        notes.add(SHADOWMASK_NOTE)
+    for names in (sh.AXIS_FILES, ("dir",)):
+        found = {n: next((p for p in paths if p.endswith(f".{estimator}.{n}.exr")), None) for n in names}
+        if all(found.values()):
+            return {n: load_image(path, f"{image_name}.{estimator}.{n}", data=True) for n, path in found.items()}
+    return None
+
+
+SHADOWMASK_NOTE = (
+    "shadowmask: Apply shows the lightmap only (with --shadowmask-mode subtract it lacks the masked lights' "
+    "direct light): Blender cannot multiply one light by a texture on the receiving surface (EEVEE takes no "
+    "light nodes, Cycles' light nodes are evaluated at the light, and a material cannot tell one light's "
+    "share from another's); an engine adds each masked light, unshadowed, times its channel of "
+    "<object>.<estimator>.shadowmask.exr")
+
+
 def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional[dict] = None,
-              copy_materials: bool = False, frames: Optional[tuple] = None) -> list:
+              copy_materials: bool = False, frames: Optional[tuple] = None,
+              log: Optional[Callable[[str], None]] = None) -> list:
     """Load each baked EXR and wire it into its object's materials; returns the objects.
     `uv_layer`: one name, {object name: name}, or None for DEFAULT_UV. `objects` maps a lightmap's
     object name to the object to apply it to (default: the scene's object of that name);
     `copy_materials` gives each object its own material copies even when nobody shares them.
     `frames` (first, last): `files` are the first frame's of a range baked at every frame, shown as
-    image sequences that follow the timeline."""
+    image sequences that follow the timeline. A directional bake's maps (sh or dominant) are shaded
+    against each material's normal; `log` hears what Apply cannot show (a shadowmask)."""
     targets, lightmap = {}, lightmap_of(bl_scene, files)  # an atlas goes to each of its objects
     for name in lightmap:
         obj = (objects or {}).get(name) or bl_scene.objects.get(name)
         if obj is not None:
             targets[name] = obj
+    notes = set()
     for name, obj in targets.items():
         image_name, paths = lightmap[name]
         exr = [p for p in paths if p.endswith(".exr")]
@@ -211,8 +251,12 @@ def apply_all(bl_scene, files: dict, uv_layer, estimator: str, objects: Optional
         if image_name != name:  # an atlas: its objects' charts lie in the atlas UV layer
             layer = ATLAS_UV
         revert(obj)  # a new bake replaces the last one
-        image = load_image(exr[0], f"{obj.name if image_name == name else image_name}.{estimator}",
-                           sequence=frames is not None)
+        stem = obj.name if image_name == name else image_name
+        image = load_image(exr[0], f"{stem}.{estimator}", sequence=frames is not None)
+        l1 = _directional_images(exr, estimator, stem, notes)
         shared = copy_materials or bool(shared_materials(obj, list(targets.values())))
-        apply_lightmap(obj, image, layer or DEFAULT_UV, shared, frames)
+        apply_lightmap(obj, image, layer or DEFAULT_UV, shared, frames, l1)
+    for note in sorted(notes):
+        if log is not None:
+            log(note)
     return list(targets.values())

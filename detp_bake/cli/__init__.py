@@ -100,8 +100,12 @@ def _option_arguments(b) -> None:
             b.add_argument(opt.flag, action=argparse.BooleanOptionalAction, default=opt.default,
                            help=f"{opt.help[0].lower()}{opt.help[1:]} (default {default})")
             continue
-        choices = [c[0] for c in opt.choice_list] or None
         text = opt.help[0].lower() + opt.help[1:]
+        if opt.kind is tuple:  # a list of names
+            b.add_argument(opt.flag, nargs="+", default=list(opt.default), metavar=opt.metavar,
+                           help=text.replace("%", "%%"))
+            continue
+        choices = [c[0] for c in opt.choice_list] or None
         if choices:
             text += " (" + "; ".join(f"{v}: {h}" for v, _, h in opt.choice_list) + ")"
         b.add_argument(opt.flag, type=opt.kind, default=opt.default, choices=choices, metavar=opt.metavar,
@@ -283,7 +287,7 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
     # The files are in place: from here on a signal no longer undoes the bake.
     saved = None
     if args.apply:
-        blender.apply_all(bl_scene, files, args.uv_layer, settings.estimator)
+        blender.apply_all(bl_scene, files, args.uv_layer, settings.estimator, log=_log)
     if args.save:
         saved = Path(args.save).resolve()
         blender.save_blend(saved, files)

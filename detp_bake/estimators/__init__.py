@@ -49,6 +49,7 @@ class Context:
     extent: Optional[np.ndarray] = None  # per texel, the size of its own piece of surface (rise.piece_extent)
     frames: Optional["FrameState"] = None  # set when baking a frame range (frames.py)
     scene: Optional[object] = None  # the (recentred) Scene, for estimators that read its triangles
+    directional: bool = False  # also sum L1, each sample's share times its direction (lightmap/sh.py)
 
 
 @dataclass
@@ -68,6 +69,7 @@ class FrameState:
 class Estimate:
     irradiance: np.ndarray  # (N, 3) float64, W/m²
     counters: dict = field(default_factory=dict)
+    l1: Optional[np.ndarray] = None  # (N, 9) float64, W/m² times unit directions (lightmap/sh.py), when directional
 
 
 class Estimator:
@@ -91,6 +93,7 @@ class Estimator:
     # refreshing less often (job.py).
     slow_preview = False
     bytes_per_texel = 160  # memory an estimator keeps per texel (discs, index, sums): for the estimate
+    directional = False  # sums L1 too when Context.directional (under 'l1' in its take sums)
 
     def __init__(self, texels: TexelSet, settings: EstimatorSettings,
                  progress: Optional[Callable[[float], None]] = None, context: Optional[Context] = None):

@@ -13,13 +13,13 @@ import numpy as np
 
 from ..errors import BakeError
 from . import Estimate, Estimator, register
-from .discs import crossing_weight, make_discs
+from .discs import add_l1, crossing_weight, l1_sums, make_discs
 
 WORK_LIMIT = 4e10  # segment–disc tests: about a minute on two cores
 
 
 @numba.njit(cache=True, parallel=True)
-def _splat_all(o, w, length, flux, cen, nrm, rad, slab, eps, kernel, acc, hits):
+def _splat_all(o, w, length, flux, cen, nrm, rad, slab, eps, kernel, acc, acc_l1, hits):
     for j in numba.prange(cen.shape[0]):
         cx, cy, cz = cen[j, 0], cen[j, 1], cen[j, 2]
         nx, ny, nz = nrm[j, 0], nrm[j, 1], nrm[j, 2]
@@ -34,6 +34,7 @@ def _splat_all(o, w, length, flux, cen, nrm, rad, slab, eps, kernel, acc, hits):
                 s0 += k * flux[i, 0]
                 s1 += k * flux[i, 1]
                 s2 += k * flux[i, 2]
+                add_l1(acc_l1, j, k, flux, w, i)
                 count += 1
         acc[j, 0] += s0
         acc[j, 1] += s1
@@ -51,6 +52,7 @@ class BruteForceDETP(Estimator):
     description = "Every segment against every disc: slow, the reference the others match"
     streaming = True
     discs = True
+    directional = True
     compared = False  # far too slow beyond small scenes
 
     def __init__(self, texels, settings, progress=None, context=None):
@@ -62,6 +64,7 @@ class BruteForceDETP(Estimator):
         self.discs = make_discs(texels, settings, self.context.scene_radius, self.context.clearance, self.context.rise,
                                 self.context.extent)
         self.acc = np.zeros((len(texels), 3))
+        self.acc_l1 = l1_sums(len(texels), self.context.directional)
         self.crossings = np.zeros(len(texels), np.int64)
         self.segments = 0
         self.seconds = 0.0
@@ -70,7 +73,7 @@ class BruteForceDETP(Estimator):
         t0 = time.perf_counter()
         d = self.discs
         _splat_all(batch.seg_origin, batch.seg_dir, batch.seg_length, batch.seg_flux, d.centre, d.normal,
-                   d.radius, d.slab, d.eps, d.kernel, self.acc, self.crossings)
+                   d.radius, d.slab, d.eps, d.kernel, self.acc, self.acc_l1, self.crossings)
         self.segments += batch.segment_count
         self.seconds += time.perf_counter() - t0
 
@@ -78,12 +81,16 @@ class BruteForceDETP(Estimator):
         sums = {"irradiance": self.acc, "crossings": int(self.crossings.sum()), "segments": self.segments,
                 "seconds": self.seconds}
         self.acc = np.zeros_like(self.acc)
+        if len(self.acc_l1):
+            sums["l1"], self.acc_l1 = self.acc_l1, np.zeros_like(self.acc_l1)
         self.crossings[:] = 0
         self.segments, self.seconds = 0, 0.0
         return sums
 
     def absorb(self, sums):
         self.acc += sums["irradiance"]
+        if len(self.acc_l1):
+            self.acc_l1 += sums["l1"]
         self.crossings[0] += sums["crossings"]  # finish reads the total only
         self.segments += sums["segments"]
         self.seconds += sums["seconds"]
@@ -93,4 +100,5 @@ class BruteForceDETP(Estimator):
         return Estimate(self.acc, {"segments": self.segments, "discs": n,
                                    "ray_disc_tests": self.segments * n,
                                    "crossings": int(self.crossings.sum()),
-                                   "seconds_build": 0.0, "seconds_query": self.seconds})
+                                   "seconds_build": 0.0, "seconds_query": self.seconds},
+                        self.acc_l1 if len(self.acc_l1) else None)

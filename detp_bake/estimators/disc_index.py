@@ -28,7 +28,7 @@ import numpy as np
 
 from . import Estimate, Estimator, patches, register
 from ..bvh import AXIS, CONE, HI, LO, STACK_DEPTH, build
-from .discs import crossing_weight, make_discs
+from .discs import add_l1, crossing_weight, l1_sums, make_discs
 from ..morton import segment_order
 from .patches import SIDE, form_patches, group_keys, mark_cut, patch_splat
 
@@ -135,7 +135,7 @@ def _lists(seg, clu, used, clusters):
 
 @numba.njit(cache=True, parallel=True)
 def _splat(o, w, length, flux, eps, kernel, node, left, item_first, item_count, item_disc, item_patch, patch_geo,
-           patch_site, roots, disc, start, lists, schedule, acc, stats):
+           patch_site, roots, disc, start, lists, schedule, acc, acc_l1, stats):
     """Step 3: each cluster walks its segments through its subtree; its discs are its own."""
     for s in numba.prange(schedule.shape[0]):
         c = schedule[s]
@@ -158,7 +158,7 @@ def _splat(o, w, length, flux, eps, kernel, node, left, item_first, item_count, 
                         if p >= 0:
                             patch_visits += 1
                             tests, hits = patch_splat(p, patch_geo, patch_site, disc, o, w, length, flux, i, eps,
-                                                      kernel, acc)
+                                                      kernel, acc, acc_l1)
                             disc_tests += tests
                             crossings += hits
                             continue
@@ -172,6 +172,7 @@ def _splat(o, w, length, flux, eps, kernel, node, left, item_first, item_count, 
                             acc[j, 0] += k * flux[i, 0]
                             acc[j, 1] += k * flux[i, 1]
                             acc[j, 2] += k * flux[i, 2]
+                            add_l1(acc_l1, j, k, flux, w, i)
                     continue
                 for q in range(left[nd], left[nd] + 2):
                     node_tests += 1
@@ -195,6 +196,7 @@ class DiscIndex(Estimator):
     description = "Tangent-disc density estimation with the discs indexed in a BVH (fastest)"
     streaming = True
     discs = True
+    directional = True
 
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)
@@ -222,6 +224,7 @@ class DiscIndex(Estimator):
         self.cluster_of = np.full(self.tree.nodes, -1, np.int32)
         self.cluster_of[self.tree.clusters] = np.arange(len(self.tree.clusters), dtype=np.int32)
         self.acc = np.zeros((len(texels), 3))
+        self.acc_l1 = l1_sums(len(texels), self.context.directional)
         self.stats = np.zeros((len(self.tree.clusters), 5), np.int64)  # node, disc tests, crossings, entries, patches
         self.bin_tests = 0
         self.bin_slots = 4  # pairs kept per segment of a chunk; doubled when a chunk overflows
@@ -260,7 +263,7 @@ class DiscIndex(Estimator):
         with numba.parallel_chunksize(1):
             _splat(o, w, length, flux, self.eps, self.kernel, t.node, t.left, t.item_first, t.item_count, t.item_disc,
                    t.item_patch, t.patch_geo, t.patch_site, t.clusters, self.disc, start, lists, schedule, self.acc,
-                   self.stats)
+                   self.acc_l1, self.stats)
         t3 = time.perf_counter()
         self.stats[:, 3] += sizes
         self.bin_tests += int(tests.sum())
@@ -279,6 +282,10 @@ class DiscIndex(Estimator):
         sums = {"irradiance": irradiance, "stats": self.stats.sum(axis=0), "bin_tests": self.bin_tests,
                 "segments": self.segments, **{f"seconds_{k}": self.seconds[k] for k in self.QUERY_SECONDS}}
         self.acc[:] = 0.0
+        if len(self.acc_l1):
+            sums["l1"] = np.empty_like(self.acc_l1)
+            sums["l1"][self.tree.order] = self.acc_l1
+            self.acc_l1[:] = 0.0
         self.stats[:] = 0
         self.bin_tests = self.segments = 0
         for k in self.QUERY_SECONDS:
@@ -287,6 +294,8 @@ class DiscIndex(Estimator):
 
     def absorb(self, sums):
         self.acc += sums["irradiance"][self.tree.order]
+        if len(self.acc_l1):
+            self.acc_l1 += sums["l1"][self.tree.order]
         self.stats[0] += sums["stats"]  # finish reads the column sums only
         self.bin_tests += sums["bin_tests"]
         self.segments += sums["segments"]
@@ -313,4 +322,8 @@ class DiscIndex(Estimator):
             "cluster_entries": int(st[3]), "patch_visits": int(st[4]), "ray_disc_tests": int(st[1]),
             "crossings": int(st[2])}
         counters.update({f"seconds_{k}": v for k, v in self.seconds.items()})
-        return Estimate(out, counters)
+        l1 = None
+        if len(self.acc_l1):
+            l1 = np.empty_like(self.acc_l1)
+            l1[self.tree.order] = self.acc_l1
+        return Estimate(out, counters, l1)

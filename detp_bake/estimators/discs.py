@@ -110,6 +110,23 @@ def make_discs(texels: TexelSet, settings, scene_radius: float, clearance=None, 
 
 
 @numba.njit(cache=True, inline="always")
+def add_l1(acc_l1, j, k, flux, w, i):
+    """A directional bake's L1 (lightmap/sh.py): the crossing's weighted flux times the way back
+    along segment i, into acc_l1[disc j, axis·3 + colour]; nothing when acc_l1 has no rows (a plain
+    bake passes an empty array, so the kernels stay one compiled version)."""
+    if acc_l1.shape[0] > 0:
+        for a in range(3):
+            back = -k * w[i, a]
+            for c in range(3):
+                acc_l1[j, 3 * a + c] += back * flux[i, c]
+
+
+def l1_sums(n: int, directional: bool) -> np.ndarray:
+    """The L1 sums of n discs, (n, 9), or the empty array of a plain bake (add_l1)."""
+    return np.zeros((n, 9) if directional else (0, 9))
+
+
+@numba.njit(cache=True, inline="always")
 def crossing_weight(ox, oy, oz, wx, wy, wz, length, cx, cy, cz, nx, ny, nz, r, slab, eps, kernel):
     """Kernel weight of the segment for the disc, 0.0 when it does not cross (see module doc)."""
     wn = wx * nx + wy * ny + wz * nz

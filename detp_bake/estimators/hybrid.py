@@ -107,6 +107,7 @@ class Hybrid(Estimator):
                    "texels by the sphere cache (or a disc index) every frame")
     streaming = True
     discs = True
+    directional = True
     compared = False  # one frame: disc_index's numbers at more cost
     group_segments = STREAM_SEGMENTS
     # The disc index's, and a copy of the static texels (texels.select) it is built over: measured,
@@ -123,10 +124,12 @@ class Hybrid(Estimator):
         static = ~of_objects(texels, moving, self.context.scene)
         clearance, rise, extent = self.context.clearance, self.context.rise, self.context.extent
         scene_radius, expected = self.context.scene_radius, self.context.expected_segments
+        self.l1 = self.context.directional
 
         def context(mask):  # the bake's context for the texels of `mask`
             return Context(scene_radius, expected, None if clearance is None else clearance[mask],
-                           None if rise is None else rise[mask], None if extent is None else extent[mask])
+                           None if rise is None else rise[mask], None if extent is None else extent[mask],
+                           directional=self.l1)
 
         static_texels = select(texels, static)
         sub = context(static)
@@ -183,13 +186,18 @@ class Hybrid(Estimator):
 
     def take(self):
         irradiance = np.zeros((len(self.texels), 3))
+        l1 = np.zeros((len(self.texels), 9)) if self.l1 else None
         sums = {"segments": self.segments, "near": self.kept_segments}
         self.segments = self.kept_segments = 0
         for label, rows, est in self._parts():
             part = est.take()
             irradiance[rows] = part.pop("irradiance")
+            if l1 is not None:
+                l1[rows] = part.pop("l1")
             sums.update({f"{label}/{k}": v for k, v in part.items()})
         sums["irradiance"] = irradiance
+        if l1 is not None:
+            sums["l1"] = l1
         return sums
 
     def absorb(self, sums):
@@ -197,10 +205,12 @@ class Hybrid(Estimator):
         self.kept_segments += sums["near"]
         for label, rows, est in self._parts():
             part = {k.split("/", 1)[1]: v for k, v in sums.items() if k.startswith(label + "/")}
-            est.absorb({**part, "irradiance": sums["irradiance"][rows]})
+            est.absorb({**part, "irradiance": sums["irradiance"][rows],
+                        **({"l1": sums["l1"][rows]} if self.l1 else {})})
 
     def finish(self):
         out = np.zeros((len(self.texels), 3))
+        l1 = np.zeros((len(self.texels), 9)) if self.l1 else None
         counters = {"static_texels": int(len(self.static_rows)), "moving_texels": int(len(self.cache_rows)) -
                     self.rerouted, "rerouted_texels": self.rerouted, "index_reused": bool(self.reused),
                     "seconds_build": self.seconds_build, "crossings": 0, "segments": self.segments,
@@ -209,7 +219,9 @@ class Hybrid(Estimator):
         for label, rows, est in self._parts():
             got = est.finish()
             out[rows] = got.irradiance
+            if l1 is not None:
+                l1[rows] = got.l1
             # Crossings of rerouted texels' indexed discs are counted too (they are not used).
             counters["crossings"] += got.counters.get("crossings", 0)
             counters.update({f"{label}_{k}": v for k, v in got.counters.items()})
-        return Estimate(out, counters)
+        return Estimate(out, counters, l1)

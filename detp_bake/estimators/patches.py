@@ -17,7 +17,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .discs import crossing_weight
+from .discs import add_l1, crossing_weight
 
 SIDE = 32  # lattice sites per patch row and column
 MIN_SITES = 12  # smaller groups stay loose discs
@@ -240,14 +240,14 @@ def form_patches(keys_sorted, order, li, lj, centre, normal, radius, slab, latti
 
 
 @numba.njit(cache=True, inline="always")
-def patch_splat(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc):
+def patch_splat(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, acc_l1):
     """Add segment i to the discs of patch p it crosses; returns (disc tests, crossings). Inlined
     into the traversal: a call would take and release a reference to every array it is passed."""
     mode, px, py, pz, dp, hb, dh = _point(p, geo, o, w, length, i, eps)
     if mode == 0:
         return 0, 0
     if mode == 1:
-        return _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, px, py, pz, dp, hb, dh)
+        return _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, acc_l1, px, py, pz, dp, hb, dh)
     # In doubt (grazing, or ending within rounding of the plane or the slab): test every disc.
     tests = 0
     hits = 0
@@ -255,7 +255,7 @@ def patch_splat(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc):
         d = site[p, s]
         if d != -1:
             tests += 1
-            hits += _add(d if d >= 0 else -d - 2, disc, o, w, length, flux, i, eps, kernel, acc)
+            hits += _add(d if d >= 0 else -d - 2, disc, o, w, length, flux, i, eps, kernel, acc, acc_l1)
     return tests, hits
 
 
@@ -304,13 +304,14 @@ def _point(p, geo, o, w, length, i, eps):
 
 
 @numba.njit(cache=True, inline="always")
-def _add(d, disc, o, w, length, flux, i, eps, kernel, acc):
+def _add(d, disc, o, w, length, flux, i, eps, kernel, acc, acc_l1):
     k = crossing_weight(o[i, 0], o[i, 1], o[i, 2], w[i, 0], w[i, 1], w[i, 2], length[i], disc[0, d], disc[1, d],
                         disc[2, d], disc[3, d], disc[4, d], disc[5, d], disc[6, d], disc[7, d], eps, kernel)
     if k > 0.0:
         acc[d, 0] += k * flux[i, 0]
         acc[d, 1] += k * flux[i, 1]
         acc[d, 2] += k * flux[i, 2]
+        add_l1(acc_l1, d, k, flux, w, i)
         return 1
     return 0
 
@@ -340,7 +341,7 @@ def _cut_site(d, disc, kernel, px, py, pz, dp, hb, dh):
 
 
 @numba.njit(cache=True, inline="always")
-def _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, px, py, pz, dp, hb, dh):
+def _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, acc_l1, px, py, pz, dp, hb, dh):
     """Sites within r of the point (px, py, pz), each row's run from one square root. Within
     dp + slack of the circle, and for the Epanechnikov kernel, crossing_weight decides. A disc cut
     short (by tangent clearance: its own radius and slab) is decided the same way on its own
@@ -399,17 +400,19 @@ def _rows(p, geo, site, disc, o, w, length, flux, i, eps, kernel, acc, px, py, p
                     acc[dd, 0] += k * f0
                     acc[dd, 1] += k * f1
                     acc[dd, 2] += k * f2
+                    add_l1(acc_l1, dd, k, flux, w, i)
                 elif c == 2:
                     tests += 1
-                    hits += _add(-d - 2, disc, o, w, length, flux, i, eps, kernel, acc)
+                    hits += _add(-d - 2, disc, o, w, length, flux, i, eps, kernel, acc, acc_l1)
             elif in_lo <= il <= in_hi:
                 hits += 1
                 acc[d, 0] += k_in * f0
                 acc[d, 1] += k_in * f1
                 acc[d, 2] += k_in * f2
+                add_l1(acc_l1, d, k_in, flux, w, i)
             else:
                 tests += 1
-                hits += _add(d, disc, o, w, length, flux, i, eps, kernel, acc)
+                hits += _add(d, disc, o, w, length, flux, i, eps, kernel, acc, acc_l1)
     return tests, hits
 
 

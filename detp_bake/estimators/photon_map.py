@@ -59,6 +59,7 @@ class PhotonMap(Estimator):
     stores_hits = True
     slow_preview = True
     baseline = True
+    directional = True
 
     @classmethod
     def fixed_noise(cls, settings):
@@ -94,6 +95,7 @@ class PhotonMap(Estimator):
         t0 = time.perf_counter()
         n = len(self.texels)
         irradiance = np.zeros((n, 3))
+        l1 = np.zeros((n, 9)) if self.context.directional else None
         pos, wdir, flux, hnorm = (np.concatenate([p[i] for p in parts]) if parts
                                   else np.zeros((0, 3), np.float32) for i in range(4))
         hits = len(pos)
@@ -101,7 +103,7 @@ class PhotonMap(Estimator):
         counters = {"hits": hits, "k": k}
         if k < 2:
             counters.update(seconds_build=0.0, seconds_query=0.0)
-            return Estimate(irradiance, counters)
+            return Estimate(irradiance, counters, l1)
         # An unbalanced, non-compact tree builds several times faster and queries about as fast.
         tree = cKDTree(pos, balanced_tree=False, compact_nodes=False)
         t1 = time.perf_counter()
@@ -124,7 +126,11 @@ class PhotonMap(Estimator):
             total = np.einsum("nk,nkc->nc", ok.astype(np.float64), flux[near].astype(np.float64))
             r2 = np.maximum(dist[:, k - 1], 1e-12) ** 2
             irradiance[a:b] = total / (np.pi * r2)[:, None]
+            if l1 is not None:  # the same hits' flux times the way they came (lightmap/sh.py)
+                back = np.einsum("nk,nkc,nka->nac", ok.astype(np.float64), flux[near].astype(np.float64),
+                                 -wdir[near].astype(np.float64))
+                l1[a:b] = back.reshape(b - a, 9) / (np.pi * r2)[:, None]
             progress(b / n)
         counters.update(photons_used=used, seconds_build=t1 - t0,
                         seconds_query=time.perf_counter() - t1)
-        return Estimate(irradiance, counters)
+        return Estimate(irradiance, counters, l1)

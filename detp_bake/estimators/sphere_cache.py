@@ -18,7 +18,7 @@ import numba
 import numpy as np
 
 from . import Estimate, Estimator, register
-from .discs import crossing_weight, make_discs
+from .discs import add_l1, crossing_weight, l1_sums, make_discs
 from ..morton import morton_order
 
 STREAM_SEGMENTS = 2_000_000
@@ -36,7 +36,7 @@ def _grow(buf, need):
 
 @numba.njit(cache=True, parallel=True)
 def _run(o, w, length, flux, eps, visit, edges, sc, sr, levels, radii,
-         cen, nrm, rad, slab, kernel, acc, stats):
+         cen, nrm, rad, slab, kernel, acc, acc_l1, stats):
     n = o.shape[0]
     kmax = radii.shape[0] - 1
     for ci in numba.prange(edges.shape[0] - 1):
@@ -97,6 +97,7 @@ def _run(o, w, length, flux, eps, visit, edges, sc, sr, levels, radii,
                     s0 += kw * flux[i, 0]
                     s1 += kw * flux[i, 1]
                     s2 += kw * flux[i, 2]
+                    add_l1(acc_l1, j, kw, flux, w, i)
             acc[j, 0] += s0
             acc[j, 1] += s1
             acc[j, 2] += s2
@@ -116,6 +117,7 @@ class SphereCache(Estimator):
     description = "Tangent-disc density estimation through Lastra's sphere cache"
     streaming = True
     discs = True
+    directional = True
     group_segments = STREAM_SEGMENTS
 
     def __init__(self, texels, settings, progress=None, context=None):
@@ -135,6 +137,7 @@ class SphereCache(Estimator):
         chunks = min(len(texels), max(4 * self.threads, -(-len(texels) // CHUNK_TEXELS)))
         self.edges = np.linspace(0, len(texels), chunks + 1).astype(np.int64)
         self.acc = np.zeros((len(texels), 3))
+        self.acc_l1 = l1_sums(len(texels), self.context.directional)
         self.stats = np.zeros((chunks, 4), np.int64)
         self.pending = []
         self.pending_count = 0
@@ -161,7 +164,7 @@ class SphereCache(Estimator):
             b = min(chunks, a + self.threads)
             _run(o, w, length, flux, d.eps, self.visit, self.edges[a:b + 1], self.sphere_centre,
                  self.sphere_radius, self.levels, self.radii, d.centre, d.normal, d.radius, d.slab, d.kernel,
-                 self.acc, self.stats[a:b])
+                 self.acc, self.acc_l1, self.stats[a:b])
             self.progress(b / chunks)
         self.segments += len(length)
         self.seconds_query += time.perf_counter() - t0
@@ -171,6 +174,8 @@ class SphereCache(Estimator):
         sums = {"irradiance": self.acc, "stats": self.stats.sum(axis=0), "segments": self.segments,
                 "seconds_query": self.seconds_query}
         self.acc = np.zeros_like(self.acc)
+        if len(self.acc_l1):
+            sums["l1"], self.acc_l1 = self.acc_l1, np.zeros_like(self.acc_l1)
         self.stats[:] = 0
         self.segments, self.seconds_query = 0, 0.0
         return sums
@@ -178,6 +183,8 @@ class SphereCache(Estimator):
     def absorb(self, sums):
         self._flush()
         self.acc += sums["irradiance"]
+        if len(self.acc_l1):
+            self.acc_l1 += sums["l1"]
         self.stats[0] += sums["stats"]  # finish reads the column sums only
         self.segments += sums["segments"]
         self.seconds_query += sums["seconds_query"]
@@ -189,4 +196,4 @@ class SphereCache(Estimator):
             "segments": self.segments, "discs": len(self.texels), "levels": len(self.radii),
             "q": float(self.settings.q), "ray_sphere_tests": int(s[0]), "ray_disc_tests": int(s[1]),
             "crossings": int(s[2]), "sphere_rebuilds": int(s[3]), "seconds_build": self.seconds_build,
-            "seconds_query": self.seconds_query})
+            "seconds_query": self.seconds_query}, self.acc_l1 if len(self.acc_l1) else None)

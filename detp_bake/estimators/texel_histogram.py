@@ -120,6 +120,28 @@ def _add(texel, weight, flux, acc):
     return counted
 
 
+@numba.njit(cache=True)
+def _add_l1(texel, weight, flux, direction, acc):
+    """L1 of the same landings (lightmap/sh.py): the flux times the way back along the photon's
+    flight, into acc[texel, axis·3 + colour], in landing order."""
+    for h in range(texel.shape[0]):
+        k = texel[h]
+        if k >= 0:
+            a = weight[h]
+            for x in range(3):
+                back = -direction[h, x]
+                for c in range(3):
+                    acc[k, 3 * x + c] += flux[h, c] * a * back
+
+
+def _adopt_or_add(own: np.ndarray, given: np.ndarray, fresh: bool) -> np.ndarray:
+    """`given` itself where `own` holds nothing yet and `given` may be kept, else own + given."""
+    if fresh and given.flags.writeable and given.flags.owndata and given.shape == own.shape:
+        return given
+    own += given
+    return own
+
+
 @register
 class TexelHistogram(Estimator):
     name = "texel_histogram"
@@ -131,6 +153,7 @@ class TexelHistogram(Estimator):
     streaming = True
     every_texel = True  # its estimate costs nothing per texel: no sites between which to blend
     for_denoiser = True
+    directional = True
 
     def __init__(self, texels, settings, progress=None, context=None):
         super().__init__(texels, settings, progress, context)
@@ -162,6 +185,7 @@ class TexelHistogram(Estimator):
         srf = surfaces(sc)
         self._surfaces = (srf.cutout, srf.opacity, srf.opacity_tex, srf.tex_uvs, srf.pixels, srf.info)
         self.acc = np.zeros((len(texels), 3))
+        self.acc_l1 = np.zeros((len(texels), 9)) if self.context.directional else None
         self.landings = self.counted = 0
         self.seconds = 0.0
 
@@ -172,6 +196,8 @@ class TexelHistogram(Estimator):
         _landing_texels(batch.hit_position, batch.hit_dir, batch.hit_triangle, *self._tables, *self._surfaces, texel,
                         weight)
         self.counted += _add(texel, weight, batch.hit_flux, self.acc)
+        if self.acc_l1 is not None:
+            _add_l1(texel, weight, batch.hit_flux, batch.hit_dir, self.acc_l1)
         self.landings += batch.hit_count
         self.seconds += time.perf_counter() - t0
 
@@ -181,16 +207,17 @@ class TexelHistogram(Estimator):
         sums = {"irradiance": self.acc, "landings": self.landings, "counted": self.counted,
                 "seconds_query": self.seconds}
         self.acc = np.zeros(self.acc.shape)
+        if self.acc_l1 is not None:
+            sums["l1"], self.acc_l1 = self.acc_l1, np.zeros(self.acc_l1.shape)
         self.landings = self.counted = 0
         self.seconds = 0.0
         return sums
 
     def absorb(self, sums):
-        given = sums["irradiance"]
-        if self.landings == 0 and given.flags.writeable and given.flags.owndata and given.shape == self.acc.shape:
-            self.acc = given  # nothing of its own yet: the sums become its own (0 + x is x)
-        else:
-            self.acc += given
+        fresh = self.landings == 0  # nothing of its own yet: the sums become its own (0 + x is x)
+        self.acc = _adopt_or_add(self.acc, sums["irradiance"], fresh)
+        if self.acc_l1 is not None:
+            self.acc_l1 = _adopt_or_add(self.acc_l1, sums["l1"], fresh)
         self.landings += sums["landings"]
         self.counted += sums["counted"]
         self.seconds += sums["seconds_query"]
@@ -201,4 +228,6 @@ class TexelHistogram(Estimator):
     def finish(self):
         """Hands its sums over, not a copy, and starts again from zero (untouched zeros take no memory)."""
         acc, self.acc = self.acc, np.zeros(self.acc.shape)  # calloc: no page touched
-        return Estimate(acc, {"landings": self.landings, "counted": self.counted, "seconds_query": self.seconds})
+        l1, self.acc_l1 = self.acc_l1, None if self.acc_l1 is None else np.zeros(self.acc_l1.shape)
+        return Estimate(acc, {"landings": self.landings, "counted": self.counted, "seconds_query": self.seconds},
+                        l1=l1)

@@ -18,11 +18,14 @@ def _oiio():
     return oiio
 
 
-def write_exr(path: str | os.PathLike, image: np.ndarray, half: bool = False) -> None:
+def write_exr(path: str | os.PathLike, image: np.ndarray, half: bool = False, channels=None) -> None:
+    """`channels`: the channels' names (a directional map's, lightmap/sh.py), else OIIO's R, G, B."""
     oiio = _oiio()
     data = np.ascontiguousarray(image[::-1], np.float32)
     h, w, c = data.shape
     spec = oiio.ImageSpec(w, h, c, "half" if half else "float")
+    if channels is not None:
+        spec.channelnames = tuple(channels)
     spec.attribute("compression", "zip")
     _write(oiio, path, spec, data)
 

@@ -21,7 +21,7 @@ from .. import estimators, options
 from ..lightmap import (charts as charts_mod, denoise as denoise_mod, fragments as fragments_mod, images,
     sites as sites_mod, texels as texels_mod, validity)
 from ..transport import direct as direct_mod, frame_direct
-from . import memory
+from . import directional as directional_mod, memory
 from ..errors import BakeCancelled, BakeError
 from ..options import (AUTO_PHOTONS, DIRECT_MODES, MAX_BOUNCES, MAX_DIRECT_SAMPLES,  # noqa: F401 (re-exported)
     MAX_PHOTONS, MAX_RESOLUTION, MAX_SPACING, PHOTONS_PER_TEXEL, default)
@@ -137,7 +137,9 @@ class _Pipeline:
         settings = _wide(settings)
         for name in self.names:
             replace(settings, estimator=name).validate()
+        directional_mod.check(settings, self.names, frame_state)
         scene.check()
+        directional_mod.check_shadowmask(settings, scene, frame_state)
         automatic = not settings.photons
         self.settings = settings = replace(settings, photons=auto_photons(scene, settings))
         self.scene, self.offset = scene.recentred()  # float32 rays and discs work near the origin (scene.py)
@@ -197,6 +199,7 @@ class _Pipeline:
         """Direct light by shadow rays (with direct='sampled'); the sharp lights' part apart when the
         lightmaps are denoised, as it stays as the shadow rays give it."""
         self.direct_e, self.sharp_e, self.direct_info = None, None, {"mode": self.settings.direct}
+        self.direct_l1 = self.sharp_l1 = self.mask = None
         if not self.sampled:
             return
         settings, tracer = self.settings, self.tracer
@@ -211,9 +214,15 @@ class _Pipeline:
         else:
             self.sharp_e = np.zeros((len(self.texels), 3), np.float32) \
                 if settings.denoise and denoise_mod.available() else None
+            if settings.directional != "none":
+                self.direct_l1 = np.zeros((len(self.texels), 9), np.float32)
+                self.sharp_l1 = None if self.sharp_e is None else np.zeros((len(self.texels), 9), np.float32)
+            if settings.shadowmask:
+                self.mask = np.zeros((len(self.texels), 4), np.float32)
             self.direct_e, info = direct_mod.direct_irradiance(
                 self.scene, self.texels, self.caster, settings.direct_samples, settings.seed, tracer.threads,
-                direct_progress, self.cancelled, sharp=self.sharp_e)
+                direct_progress, self.cancelled, sharp=self.sharp_e, l1=self.direct_l1, sharp_l1=self.sharp_l1,
+                shadowmask=settings.shadowmask, mask=self.mask, leave_out=settings.shadowmask_mode == "subtract")
         self.direct_info.update(info)
 
     def estimate_progress(self, fraction) -> None:
@@ -237,7 +246,8 @@ class _Pipeline:
         self.clearance_seconds = time.perf_counter() - t0
         self.context = estimators.Context(scene_radius=self.tracer.escape_radius,
                                           expected_segments=self.expected_segments, clearance=clearance, rise=rise,
-                                          extent=extent, frames=self.frame_state, scene=self.scene)
+                                          extent=extent, frames=self.frame_state, scene=self.scene,
+                                          directional=settings.directional != "none")
         self.runs, self.build = {}, {}
         for name in self.names:
             self.report(Progress("prepare", 0.5, f"Preparing {name}"))
@@ -372,6 +382,8 @@ class _Pipeline:
         est = None
         out.irradiance = self.sites.expand(out.irradiance)
         value = _value(out, self.direct_e, share)
+        l1 = None if out.l1 is None else directional_mod.l1_value(self.sites.expand(out.l1), self.direct_l1, share)
+        out.l1 = None
         self.spent[name] += time.perf_counter() - t1
         seconds = {"rasterise": self.rasterise_seconds, "validity": self.validity_seconds,
                    "direct": self.direct_info.get("seconds", 0.0), "clearance": self.clearance_seconds,
@@ -384,6 +396,13 @@ class _Pipeline:
         result.direct["denoised_apart"] = apart is not None and bool(result.raw_images)
         result.direct["sharp_kept"] = sharp is not None and bool(result.raw_images)
         apart = sharp = out = value = None
+        if self.mask is not None:
+            directional_mod.shadowmask_images(result, self.mask)
+        if l1 is not None:
+            t2 = time.perf_counter()
+            sharp_part = None if self.sharp_l1 is None else (self.sharp_e, self.sharp_l1)
+            directional_mod.make_images(result, l1, self.regions, self.fragments_of, sharp_part)
+            result.seconds["directional"] = time.perf_counter() - t2
         result.stopped_by, result.share = self.stopped_by, share
         result.export = dict(getattr(self.scene, "export_stats", None) or {})
         result.cluster = dict(self.cluster.last) if self.cluster is not None else {}
@@ -549,7 +568,8 @@ def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) ->
     denoised = max((o.resolution * o.resolution for o in scene.objects if o.bake), default=0) \
         if settings.denoise and denoise_mod.available() else 0
     need = memory.estimate(pixels, per_texel, batch, per_photon, per_photon_kept,
-                           settings.threads or os.cpu_count() or 1, hits, geometry, denoised)
+                           settings.threads or os.cpu_count() or 1, hits, geometry, denoised,
+                           settings.directional != "none", bool(settings.shadowmask))
     budget = settings.memory_budget_mb * 1e6 if settings.memory_budget_mb else 0.8 * memory.available_bytes()
     if budget and need.total > budget:
         advice = []

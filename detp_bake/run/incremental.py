@@ -105,6 +105,9 @@ def settings_key(settings) -> str:
     values = asdict(settings)
     for name in ("threads", "memory_budget_mb"):
         values.pop(name, None)
+    if values.get("directional") == "none" and not values.get("shadowmask"):
+        for name in ("directional", "shadowmask", "shadowmask_mode"):
+            values.pop(name)  # keys of plain bakes stay as they were
     values["denoised"] = bool(settings.denoise and denoise.available())  # pyoidn may come or go
     return json.dumps(values, sort_keys=True, default=list)
 

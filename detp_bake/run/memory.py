@@ -44,6 +44,16 @@ OIDN_MOST = 350_000_000
 # bake's value, raw, direct, indirect, sharp and result images, and the denoiser's source, filled
 # colour, output and result, 14 float32 RGB images in all, plus labels and masks.
 DENOISE_PIXEL_BYTES = 14 * 12 + 12
+# --directional (lightmap/sh.py): nine more channels a texel: the estimator's float64 sums and the
+# copy a take hands over (2 × 72), the shadow rays' L1 and its sharp part (2 × 36, float32), the
+# per-texel value (36), and per pixel the raw, denoised and written images (3 × 36).
+DIRECTIONAL_BYTES = 2 * 72 + 2 * 36 + 36 + 3 * 36
+# --shadowmask: four float32 channels a texel (the visibility), its image and the dilated copy.
+# Measured (benchmarks/memory.py --directional sh [--shadowmask], 2048², 5 % gutter, OIDN): the
+# texel histogram peaks at 341 bytes a texel plain, 675 with sh, 373 with the shadowmask, 709 with
+# both (estimates 504, 948, 563, 1007); disc_index with both at 741 (estimate 1007). The L1 peak is
+# the clamp's float64 norms while the images are made; both figures stay as they are.
+SHADOWMASK_BYTES = 3 * 16
 MAX_BATCH_SEGMENTS = 4_000_000  # segments one batch may hold (160 MB of records per set)
 MIN_BATCH = 1000
 
@@ -77,12 +87,14 @@ class Estimate:
 
 
 def estimate(pixels: int, estimator_bytes: dict, batch: int, per_photon_all: float, per_photon_kept: float,
-             threads: int, stored_hits: int = 0, geometry_bytes: int = 0, denoised_pixels: int = 0) -> Estimate:
+             threads: int, stored_hits: int = 0, geometry_bytes: int = 0, denoised_pixels: int = 0,
+             directional: bool = False, shadowmask: bool = False) -> Estimate:
     """pixels: the lightmaps' pixels (an upper bound on texels, and on the estimators' sites,
     sites.py, which leave them about half the texels of a large lightmap); estimator_bytes: {name:
     bytes per texel}; batch: photons per batch; per_photon_all / per_photon_kept: segments a photon
     makes / hands to the estimator; stored_hits: hits the photon map keeps; denoised_pixels: the largest
-    lightmap's pixels when lightmaps are denoised (one at a time), else 0."""
+    lightmap's pixels when lightmaps are denoised (one at a time), else 0; directional: L1 is baked
+    too (DIRECTIONAL_BYTES a pixel)."""
     parts = {
         "texels": pixels * TEXEL_BYTES,
         "lightmap images": pixels * PIXEL_BYTES,
@@ -94,6 +106,10 @@ def estimate(pixels: int, estimator_bytes: dict, batch: int, per_photon_all: flo
     }
     for name, per_texel in estimator_bytes.items():
         parts[f"estimator {name} texels"] = int(pixels * per_texel)  # its state per texel
+    if directional:
+        parts["directional maps"] = pixels * DIRECTIONAL_BYTES
+    if shadowmask:
+        parts["shadowmask"] = pixels * SHADOWMASK_BYTES
     if stored_hits:
         parts["photon map hits"] = stored_hits * HIT_BYTES
     if denoised_pixels:

@@ -44,6 +44,14 @@ class BakeResult:
     memory: dict = field(default_factory=dict)  # the estimate made before work, and the peak used
     export: dict = field(default_factory=dict)  # what the exporter found (instances, triangles, textures, …)
     raw_images: dict = field(default_factory=dict)  # object name -> image before denoising (when denoised)
+    # --directional: object name -> (H, W, 9) L1 or (H, W, 4) direction map (run/directional.py), and
+    # what report.json says of it (mode, channel names, clamped texels)
+    l1_images: dict = field(default_factory=dict)
+    directional: dict = field(default_factory=dict)
+    # --shadowmask: object name -> (H, W, 4) visibility of the masked lights, one per channel in the
+    # order of shadowmask["lights"] (unused channels 1), and what report.json says of it
+    shadowmask_images: dict = field(default_factory=dict)
+    shadowmask: dict = field(default_factory=dict)
     cluster: dict = field(default_factory=dict)  # where the photons were traced when not here (distributed.py)
     warnings: list = field(default_factory=list)
     stopped_by: str = "photons"  # photons (all traced), target_noise, time_limit, user (Stop and keep)
@@ -67,6 +75,18 @@ class BakeResult:
         return [{"name": name, "image": lm.name, **place, **common,
                  **({"key": self.keys[name], "reused": False} if name in self.keys else {})}
                 for name, place in lm.placement.items()]
+
+    def extra_maps(self) -> list:
+        """(file suffix, {object name: image}, channel names) of the maps written beside each
+        lightmap: <object>.<estimator>.<suffix>.exr (writing.py)."""
+        out = []
+        if self.l1_images:
+            out.append((self.directional["suffix"], self.l1_images, self.directional.get("file_channels")))
+            for a, axis in enumerate(self.directional.get("axis_files", [])):  # RGB, for Blender and engines
+                out.append((axis, {name: img[..., 3 * a:3 * a + 3] for name, img in self.l1_images.items()}, None))
+        if self.shadowmask_images:
+            out.append(("shadowmask", self.shadowmask_images, self.shadowmask["channels"]))
+        return out
 
     def report(self) -> dict:
         st = self.stats
@@ -99,6 +119,8 @@ class BakeResult:
             "memory": self.memory,
             "export": self.export,
             "denoised": bool(self.raw_images),
+            **({"directional": self.directional} if self.directional else {}),
+            **({"shadowmask": self.shadowmask} if self.shadowmask else {}),
             **({"cluster": self.cluster} if self.cluster else {}),
             "warnings": list(self.warnings),
             "seconds": self.seconds,

@@ -37,6 +37,10 @@ class BakeSettings:
     atlas_size: int = default("atlas_size")
     atlas_padding: int = default("atlas_padding")
     atlas_charts: str = default("atlas_charts")
+    directional: str = default("directional")  # none, sh or dominant (lightmap/sh.py)
+    # Lights whose visibility goes into a shadowmask, and whether their direct light leaves the lightmap
+    shadowmask: tuple = default("shadowmask")
+    shadowmask_mode: str = default("shadowmask_mode")
     formats: tuple = ("exr",)
     half: bool = False
     threads: int = default("threads")  # 0: all cores

@@ -38,6 +38,9 @@ def output_paths(result: BakeResult, out_dir: Path, frame: Optional[int] = None)
     if result.settings.keep_raw and result.raw_images:
         for name, paths in out.items():
             paths.append(out_dir / f"{stems[name]}.{result.settings.estimator}.raw{number}.exr")
+    for suffix, _, _ in result.extra_maps():  # last: Apply takes a lightmap's first EXR as its plain lightmap
+        for name, paths in out.items():
+            paths.append(out_dir / f"{stems[name]}.{result.settings.estimator}.{suffix}{number}.exr")
     return out
 
 
@@ -62,18 +65,25 @@ def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Cal
     out = images.check_writable_dir(out_dir)
     report = progress or (lambda p: None)
     paths = {name: output_paths(r, out, frame) for name, r in results.items()}
+    number = "" if frame is None else f".{frame:04d}"
     count = sum(len(p) for p in paths.values())
     done = 0
     try:
         with staging.FileSet(out) as files:
             for estimator, result in results.items():
+                stems = images.file_stems(result.images)
                 for name, targets in paths[estimator].items():
+                    maps = {f"{stems[name]}.{result.settings.estimator}.{suffix}{number}.exr": (pictures[name], channels)
+                            for suffix, pictures, channels in result.extra_maps()}
                     for target in targets:
                         fmt = target.suffix[1:]
                         raw = f".{result.settings.estimator}.raw." in target.name
                         picture = result.raw_images[name] if raw else result.images[name]
-                        half = result.settings.half
-                        files.stage(target.name, lambda tmp: images.write_exr(tmp, picture, half=half)
+                        half, channels = result.settings.half, None
+                        if target.name in maps:  # a directional map or a shadowmask, float32 always
+                            (picture, channels), half = maps[target.name], False
+                        files.stage(target.name, lambda tmp: images.write_exr(tmp, picture, half=half,
+                                                                              channels=channels)
                                     if fmt == "exr" else images.WRITERS[fmt](tmp, picture))
                         done += 1
                         if cancelled():

@@ -389,6 +389,18 @@ def _gather(n, occluded, w, owner, base, out):
 
 
 @jit
+def _gather_l1(n, arrived, w, d, owner, base, out):
+    """Directional lightmaps (lightmap/sh.py): each arriving ray's irradiance times its unit
+    direction towards the light, into out[texel, axis·3 + colour]."""
+    for k in range(n):
+        if arrived[k] > 0.0:
+            i = owner[k] - base
+            for a in range(3):
+                for c in range(3):
+                    out[i, 3 * a + c] += w[k, c] * arrived[k] * d[k, a]
+
+
+@jit
 def _gather_weighted(n, transmitted, w, owner, base, out):
     for k in range(n):
         i = owner[k] - base
@@ -447,9 +459,14 @@ class _DirectWork:
     """The shadow rays of one direct_irradiance call, chunk by chunk (`chunk`, from any thread):
     what every chunk reads (texels, lights, the scene's arrays) is set up once here."""
 
-    def __init__(self, scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel):
+    def __init__(self, scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel,
+                 l1=None, sharp_l1=None, masked=None, mask=None, leave_out=True):
         self.caster, self.lights, self.samples, self.seed, self.spread = caster, lights, samples, seed, spread
-        self.out, self.sharp, self.progress, self.cancel = out, sharp, progress, cancel
+        self.out, self.sharp, self.progress, self.cancel, self.l1 = out, sharp, progress, cancel, l1
+        self.sharp_l1 = sharp_l1
+        # Shadow-masked lights: {index in `lights`: column of `mask`}; `leave_out`: their direct light
+        # is left out of `out` (and of `l1`, `sharp`), kept in otherwise.
+        self.masked, self.mask, self.leave_out = masked or {}, mask, leave_out
         n = len(texels)
         self.pos = np.ascontiguousarray(texels.position, np.float64)
         self.nrm = np.ascontiguousarray(texels.normal, np.float64)
@@ -482,28 +499,33 @@ class _DirectWork:
                    np.empty((most, 3)), np.empty(most, np.int64))
         acc = np.zeros((b - a, 3))
         sharp_acc = np.zeros((b - a, 3)) if sharp is not None else None
+        acc_l1 = np.zeros((b - a, 9)) if self.l1 is not None else None
+        sharp_l1 = np.zeros((b - a, 9)) if self.sharp_l1 is not None else None
         shares = None
         if shared:
             shares = np.empty((b - a, len(shared)), np.int64)
             light_shares(self.kinds, self.params, self.samples, a, b, self.pos, self.nrm, shares)
         for li, light in enumerate(lights):
-            key = seed_key(self.seed * 7919 + 1000003 * (li + 1))
-            own = np.zeros((b - a, 3))
             counts = shares[:, shared.index(li)].copy() if li in shared else _NONE
-            disagree = self.cast(index, buffers, light, key, 0, light.samples, _NONE, own, counts)
-            if light.extra:
-                # A shadow edge, a spot's rim or the light's horizon crosses the texel's middle.
-                mixed = np.flatnonzero(disagree)
-                if mixed.size:
-                    more = np.zeros((b - a, 3))
-                    self.cast(index, buffers, light, key, light.samples, light.extra, (mixed + a).astype(np.int64),
-                              more)
-                    n0, n1 = light.samples, light.extra
-                    own[mixed] = (n0 * own[mixed] + n1 * more[mixed]) / (n0 + n1)
+            own, own_l1, free = self.light(index, buffers, li, light, counts)
+            if li in self.masked:
+                # Its shadow mask: the share of its unshadowed irradiance that arrives (1 where none would).
+                got, could = own.sum(axis=1), free.sum(axis=1)
+                self.mask[a:b, self.masked[li]] = np.where(could > 0.0, got / np.where(could > 0.0, could, 1.0), 1.0)
+                if self.leave_out:
+                    continue  # its direct light is the real light's times the mask (shadowmask mode)
             acc += own
+            if acc_l1 is not None:
+                acc_l1 += own_l1
             if sharp is not None and light.kind in SHARP_KINDS:
                 sharp_acc += own
+                if sharp_l1 is not None:
+                    sharp_l1 += own_l1
         self.out[a:b] = acc
+        if acc_l1 is not None:
+            self.l1[a:b] = acc_l1
+        if sharp_l1 is not None:
+            self.sharp_l1[a:b] = sharp_l1
         if sharp is not None:
             sharp[a:b] = sharp_acc
         with self.lock:
@@ -512,9 +534,32 @@ class _DirectWork:
         if self.progress is not None:
             self.progress(fraction)
 
-    def cast(self, index, buffers, light, key, j0, count, sel, into, counts=None):
-        """Rays of `light` (samples j0 … j0 + count − 1) for chunk `index` into `into`; for a light
-        with a top-up, which texels of the chunk its rays disagree on, else None."""
+    def light(self, index, buffers, li, light, counts):
+        """One light's irradiance (n, 3) at chunk `index`'s texels, its L1 (n, 9) when asked, and
+        for a masked light its irradiance were nothing in the way (n, 3); top-ups included."""
+        a, b = self.chunks[index]
+        key = seed_key(self.seed * 7919 + 1000003 * (li + 1))
+        parts = lambda: [np.zeros((b - a, 3)), np.zeros((b - a, 9)) if self.l1 is not None else None,
+                         np.zeros((b - a, 3)) if li in self.masked else None]
+        own = parts()
+        disagree = self.cast(index, buffers, light, key, 0, light.samples, _NONE, own[0], counts, own[1], own[2])
+        if light.extra:
+            # A shadow edge, a spot's rim or the light's horizon crosses the texel's middle.
+            mixed = np.flatnonzero(disagree)
+            if mixed.size:
+                more = parts()
+                self.cast(index, buffers, light, key, light.samples, light.extra, (mixed + a).astype(np.int64),
+                          more[0], None, more[1], more[2])
+                n0, n1 = light.samples, light.extra
+                for mine, extra in zip(own, more):
+                    if mine is not None:
+                        mine[mixed] = (n0 * mine[mixed] + n1 * extra[mixed]) / (n0 + n1)
+        return own
+
+    def cast(self, index, buffers, light, key, j0, count, sel, into, counts=None, into_l1=None, into_free=None):
+        """Rays of `light` (samples j0 … j0 + count − 1) for chunk `index` into `into` (and their
+        directions into `into_l1`, what they would bring unshadowed into `into_free`, when given);
+        for a light with a top-up, which texels of the chunk its rays disagree on, else None."""
         a, b = self.chunks[index]
         o, d, t, w, owner = buffers
         counts = _NONE if counts is None else counts
@@ -538,6 +583,10 @@ class _DirectWork:
             occluded = self.caster.occluded(o[:k], d[:k], t[:k])
             _gather(k, occluded, w, owner, a, into)
             arrived = occluded < 0
+        if into_l1 is not None:
+            _gather_l1(k, np.asarray(arrived, np.float64), w, d, owner, a, into_l1)
+        if into_free is not None:
+            _gather_weighted(k, np.ones(k), w, owner, a, into_free)
         self.rays[index] += k
         return _disagree(w[:k].sum(axis=1) * arrived, owner[:k] - a, b - a, count) if light.extra else None
 
@@ -549,7 +598,10 @@ _EMPTY_CDF, _EMPTY_TRI, _EMPTY_VEC = np.zeros(1), np.zeros((1, 3, 3)), np.zeros(
 def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPLES, seed: int = 0,
                       threads: int = 1, progress: Optional[Callable[[float], None]] = None,
                       cancel: Optional[Callable[[], bool]] = None, spread: bool = True,
-                      select: bool = True, sharp: Optional[np.ndarray] = None) -> tuple[np.ndarray, dict]:
+                      select: bool = True, sharp: Optional[np.ndarray] = None,
+                      l1: Optional[np.ndarray] = None, sharp_l1: Optional[np.ndarray] = None,
+                      shadowmask=(), mask: Optional[np.ndarray] = None,
+                      leave_out: bool = True) -> tuple[np.ndarray, dict]:
     """Direct irradiance E (N, 3) W/m² at every texel, and counters for report.json. Each chunk
     sums its texels' rays in float64 and stores them as float32: the value is only stored until
     the estimate is added to it, and float32 holds it to the precision of the lightmap images.
@@ -561,14 +613,24 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     `select`: the lights with extent share `samples` rays each per texel, dealt out by what each
     would give the texel unshadowed (light_shares), instead of `samples` rays each. `sharp`, an
     (N, 3) float32 array when given, receives the part of point, spot and sun lights (SHARP_KINDS):
-    their rays all agree away from penumbrae, so that part needs no denoising (bake._finish)."""
+    their rays all agree away from penumbrae, so that part needs no denoising (bake._finish). `l1`,
+    an (N, 9) float32 array when given, receives the directional lightmap's L1 of the same rays
+    (lightmap/sh.py: each arriving ray's irradiance times its direction, axis-major), and `sharp_l1`
+    (with `sharp` and `l1`) the sharp lights' part of it. `shadowmask`: names of lights whose
+    visibility goes into `mask` ((N, 4) float32, one column each, in that order): the share of the
+    light's unshadowed irradiance that its shadow rays bring, 1 where it would bring none; with
+    `leave_out` their direct light is left out of the result (the real light times the mask adds
+    it back at render time)."""
     t0 = time.perf_counter()
     lights = direct_lights(scene, int(samples), spread)
     n = len(texels)
     out = np.zeros((n, 3), np.float32)
     if n == 0 or not lights:
         return out, {"lights": len(lights), "rays": 0, "seconds": 0.0}
-    work = _DirectWork(scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel)
+    names = [light.name for light in lights]
+    masked = {names.index(name): column for column, name in enumerate(shadowmask)}
+    work = _DirectWork(scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel, l1,
+                       sharp_l1 if sharp is not None and l1 is not None else None, masked, mask, leave_out)
     if threads > 1 and len(work.chunks) > 1:
         with ThreadPoolExecutor(threads) as pool:
             for f in [pool.submit(work.chunk, i) for i in range(len(work.chunks))]:
@@ -583,6 +645,9 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
         out[cuts.covered] = 0.0
         if sharp is not None:
             sharp[cuts.covered] = 0.0
+        for part in (l1, sharp_l1, mask):
+            if part is not None:
+                part[cuts.covered] = 0.0
     rays, shared = work.rays, work.shared
     return out, {"lights": len(lights), "samples": int(samples), "rays": int(sum(rays)), "shared": len(shared),
                  "seconds": time.perf_counter() - t0}
