@@ -145,30 +145,72 @@ float detpShade(float l0, vec3 r, vec3 n, vec3 s) {
 }
 `;
 
+// The glTF normalTexture's normal in world space. No TANGENT attribute is exported, so the frame
+// comes from how world position and the map's UV change across the pixel: the gradients of u and
+// v along the surface, which point along t = dp/du and b = dp/dv wherever the UVs are not skewed.
+const NORMAL_MAP_GLSL = /* glsl */ `
+uniform sampler2D detpNormalMap;
+uniform float detpNormalScale;
+varying vec3 vDetpWorld;
+varying vec2 vDetpNormalUv;
+vec3 detpMappedNormal(vec3 n) {
+  vec3 dpx = dFdx(vDetpWorld), dpy = dFdy(vDetpWorld);
+  vec2 dux = dFdx(vDetpNormalUv), duy = dFdy(vDetpNormalUv);
+  vec3 cx = cross(dpy, n), cy = cross(n, dpx);
+  // the gradients are these over n · (dpx × dpy): keep its sign, which normalising would lose
+  float side = dot(n, cross(dpx, dpy)) < 0.0 ? -1.0 : 1.0;
+  vec3 gu = side * (cx * dux.x + cy * duy.x), gv = side * (cx * dux.y + cy * duy.y);
+  gu *= inversesqrt(max(dot(gu, gu), 1e-30));
+  gv *= inversesqrt(max(dot(gv, gv), 1e-30));
+  vec3 m = texture2D(detpNormalMap, vDetpNormalUv).xyz * 2.0 - 1.0;
+  m.xy *= detpNormalScale;
+  // glTF's +y is the image's up, where v (origin at the top-left) decreases
+  vec3 s = gu * m.x - gv * m.y + n * m.z;
+  return dot(s, s) > 0.0 ? normalize(s) : n;
+}
+`;
+
 // The unlit material's lightmap read through shade(): n is the interpolated vertex normal in world
-// space, and so is n' (the viewer applies no normal map), which gives L0: the plain lightmap.
-function shadeWithSh(material, [x, y, z]) {
+// space; n' is the glTF normalTexture's normal where the material has one (`normal`: three's
+// texture as GLTFLoader loaded it, and the glTF scale), else n again, which gives L0: the plain lightmap.
+function shadeWithSh(material, [x, y, z], normal = null) {
+  const mapped = normal !== null;
   material.onBeforeCompile = (shader) => {
     Object.assign(shader.uniforms, { detpL1x: { value: x }, detpL1y: { value: y }, detpL1z: { value: z } });
+    let vertex = 'vDetpNormal = transformNormalByInverseViewMatrix(normalMatrix * normal, viewMatrix);';
+    if (mapped) {
+      normal.texture.updateMatrix();
+      Object.assign(shader.uniforms, {
+        detpNormalMap: { value: normal.texture },
+        detpNormalMapTransform: { value: normal.texture.matrix },
+        detpNormalScale: { value: normal.scale },
+      });
+      const uv = ['uv', 'uv1', 'uv2', 'uv3'][normal.texture.channel] ?? 'uv';
+      vertex += `\nvDetpWorld = (modelMatrix * vec4(transformed, 1.0)).xyz;
+vDetpNormalUv = (detpNormalMapTransform * vec3(${uv}, 1.0)).xy;`;
+    }
+    const varyings = 'varying vec3 vDetpNormal;' +
+      (mapped ? '\nvarying vec3 vDetpWorld;\nvarying vec2 vDetpNormalUv;\nuniform mat3 detpNormalMapTransform;' : '');
     shader.vertexShader = shader.vertexShader
-      .replace('#include <common>', '#include <common>\nvarying vec3 vDetpNormal;')
-      .replace('#include <begin_vertex>',
-        '#include <begin_vertex>\nvDetpNormal = transformNormalByInverseViewMatrix(normalMatrix * normal, viewMatrix);');
+      .replace('#include <common>', `#include <common>\n${varyings}`)
+      .replace('#include <begin_vertex>', `#include <begin_vertex>\n${vertex}`);
     shader.fragmentShader = shader.fragmentShader
-      .replace('#include <common>', `#include <common>\n${SHADE_GLSL}`)
+      .replace('#include <common>', `#include <common>\n${SHADE_GLSL}${mapped ? NORMAL_MAP_GLSL : ''}`)
       .replace('vec4 lightMapTexel = texture2D( lightMap, vLightMapUv );', `vec4 lightMapTexel = texture2D( lightMap, vLightMapUv );
     {
       vec3 n = normalize(vDetpNormal);
       if (!gl_FrontFacing) n = -n;
+      vec3 s = ${mapped ? 'detpMappedNormal(n)' : 'n'};
       vec3 rx = texture2D(detpL1x, vLightMapUv).rgb, ry = texture2D(detpL1y, vLightMapUv).rgb;
       vec3 rz = texture2D(detpL1z, vLightMapUv).rgb;
       for (int c = 0; c < 3; c++) {
-        lightMapTexel[c] = detpShade(lightMapTexel[c], vec3(rx[c], ry[c], rz[c]), n, n);
+        lightMapTexel[c] = detpShade(lightMapTexel[c], vec3(rx[c], ry[c], rz[c]), n, s);
       }
     }`);
   };
-  material.customProgramCacheKey = () => SH_NAME;
+  material.customProgramCacheKey = () => `${SH_NAME}${mapped ? ' normal map' : ''}`;
   material.userData.sh = true;
+  material.userData.normalMapped = mapped;
 }
 
 // --- the plugin ----------------------------------------------------------------------------------
@@ -242,8 +284,13 @@ export class MozLightmap {
           const ref = this.parser.associations.get(material);
           if (ref?.materials === undefined || !this.parser.json.materials[ref.materials].extensions?.[NAME]) return material;
           if (!unlit.has(material)) {
+            // The normal map GLTFLoader loaded for the source material outlives it (dispose()
+            // frees the material's programs, not its textures); its scale is the glTF's, unflipped.
+            const def = this.parser.json.materials[ref.materials];
+            const normal = material.normalMap && def.normalTexture
+              ? { texture: material.normalMap, scale: def.normalTexture.scale ?? 1 } : null;
             const made = toUnlit(material);
-            if (this.sh.has(ref.materials)) shadeWithSh(made, this.sh.get(ref.materials));
+            if (this.sh.has(ref.materials)) shadeWithSh(made, this.sh.get(ref.materials), normal);
             unlit.set(material, made);
           }
           return unlit.get(material);
