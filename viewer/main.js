@@ -103,19 +103,21 @@ function show(gltf, name) {
   camera.lookAt(target);
   controls.update();
   resize();
-  let lightmapped = 0;
+  let lightmapped = 0, sh = 0, normalMapped = 0;
   const scaled = new Set();
   model.traverse((o) => {
     const materials = o.isMesh ? [].concat(o.material).filter((m) => m.userData?.lightmapped) : [];
     if (materials.length) lightmapped++;
+    if (materials.some((m) => m.userData.sh)) sh++;
+    if (materials.some((m) => m.userData.normalMapped)) normalMapped++;
     for (const m of materials) {
       // With Standard and no tone curve, Blender's exposure is this plain factor on the radiance.
       if (!scaled.has(m)) m.lightMapIntensity *= 2 ** exposure;
       scaled.add(m);
     }
   });
-  window.viewerInfo = { model: name, lightmapped, camera: gltf.cameras.length ? 'gltf' : 'framed' };
-  say(`${name}: ${lightmapped} lightmapped mesh${lightmapped === 1 ? '' : 'es'}`);
+  window.viewerInfo = { model: name, lightmapped, sh, normalMapped, camera: gltf.cameras.length ? 'gltf' : 'framed' };
+  say(`${name}: ${lightmapped} lightmapped mesh${lightmapped === 1 ? '' : 'es'}${sh ? `, ${sh} with SH L1` : ''}`);
   if (shot) {
     // Two frames: the first compiles and draws, the second is certainly on screen.
     let frames = 0;

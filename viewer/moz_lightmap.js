@@ -10,6 +10,7 @@ import {
 } from 'three';
 
 const NAME = 'MOZ_lightmap';
+const SH_NAME = 'DETP_lightmap_sh';
 const HALF_MAX = 65504;
 const WRAP = { 33071: ClampToEdgeWrapping, 33648: MirroredRepeatWrapping, 10497: RepeatWrapping };
 
@@ -111,6 +112,107 @@ export function rgbeToHalfFloat(image) {
   return half;
 }
 
+// --- DETP_lightmap_sh: L1/L0 per axis, 8 bits a channel (detp_bake/lightmap/encoding.py) ---------
+
+// r = byte / 127.5 − 1, as encoding.ratio_decode; alpha (RGB PNGs have none) is set to 1.
+export function ratioToHalfFloat(image) {
+  const { width, height, data } = image;
+  const half = new Uint16Array(width * height * 4);
+  const one = DataUtils.toHalfFloat(1);
+  for (let i = 0; i < width * height * 4; i += 4) {
+    for (let c = 0; c < 3; c++) half[i + c] = DataUtils.toHalfFloat(data[i + c] / 127.5 - 1);
+    half[i + 3] = one;
+  }
+  return half;
+}
+
+// detp_bake/lightmap/sh.py's shade() per colour channel, for the ratio r = L1/L0 (world, glTF's
+// axes), the surface's normal n and the shading normal s: L0 back where s = n.
+const SHADE_GLSL = /* glsl */ `
+uniform sampler2D detpL1x;
+uniform sampler2D detpL1y;
+uniform sampler2D detpL1z;
+varying vec3 vDetpNormal;
+float detpShade(float l0, vec3 r, vec3 n, vec3 s) {
+  const float h = 2.0 / 3.0;
+  float rn = dot(r, n);
+  float qa = h * h - 1.0, qb = 2.0 * h * (rn - h), qc = dot(r, r) - 2.0 * h * rn + h * h;
+  float a = clamp((-qb - sqrt(max(qb * qb - 4.0 * qa * qc, 0.0))) / (2.0 * qa), 0.0, 1.0);
+  vec3 d = r - (1.0 - a) * h * n;
+  d /= max(length(d), 1e-8);
+  float towards = max(dot(s, d), 0.0) / max(dot(n, d), 0.05);
+  return l0 * (a * towards + (1.0 - a) * 0.5 * (1.0 + dot(s, n)));
+}
+`;
+
+// The glTF normalTexture's normal in world space. No TANGENT attribute is exported, so the frame
+// comes from how world position and the map's UV change across the pixel: the gradients of u and
+// v along the surface, which point along t = dp/du and b = dp/dv wherever the UVs are not skewed.
+const NORMAL_MAP_GLSL = /* glsl */ `
+uniform sampler2D detpNormalMap;
+uniform float detpNormalScale;
+varying vec3 vDetpWorld;
+varying vec2 vDetpNormalUv;
+vec3 detpMappedNormal(vec3 n) {
+  vec3 dpx = dFdx(vDetpWorld), dpy = dFdy(vDetpWorld);
+  vec2 dux = dFdx(vDetpNormalUv), duy = dFdy(vDetpNormalUv);
+  vec3 cx = cross(dpy, n), cy = cross(n, dpx);
+  // the gradients are these over n · (dpx × dpy): keep its sign, which normalising would lose
+  float side = dot(n, cross(dpx, dpy)) < 0.0 ? -1.0 : 1.0;
+  vec3 gu = side * (cx * dux.x + cy * duy.x), gv = side * (cx * dux.y + cy * duy.y);
+  gu *= inversesqrt(max(dot(gu, gu), 1e-30));
+  gv *= inversesqrt(max(dot(gv, gv), 1e-30));
+  vec3 m = texture2D(detpNormalMap, vDetpNormalUv).xyz * 2.0 - 1.0;
+  m.xy *= detpNormalScale;
+  // glTF's +y is the image's up, where v (origin at the top-left) decreases
+  vec3 s = gu * m.x - gv * m.y + n * m.z;
+  return dot(s, s) > 0.0 ? normalize(s) : n;
+}
+`;
+
+// The unlit material's lightmap read through shade(): n is the interpolated vertex normal in world
+// space; n' is the glTF normalTexture's normal where the material has one (`normal`: three's
+// texture as GLTFLoader loaded it, and the glTF scale), else n again, which gives L0: the plain lightmap.
+function shadeWithSh(material, [x, y, z], normal = null) {
+  const mapped = normal !== null;
+  material.onBeforeCompile = (shader) => {
+    Object.assign(shader.uniforms, { detpL1x: { value: x }, detpL1y: { value: y }, detpL1z: { value: z } });
+    let vertex = 'vDetpNormal = transformNormalByInverseViewMatrix(normalMatrix * normal, viewMatrix);';
+    if (mapped) {
+      normal.texture.updateMatrix();
+      Object.assign(shader.uniforms, {
+        detpNormalMap: { value: normal.texture },
+        detpNormalMapTransform: { value: normal.texture.matrix },
+        detpNormalScale: { value: normal.scale },
+      });
+      const uv = ['uv', 'uv1', 'uv2', 'uv3'][normal.texture.channel] ?? 'uv';
+      vertex += `\nvDetpWorld = (modelMatrix * vec4(transformed, 1.0)).xyz;
+vDetpNormalUv = (detpNormalMapTransform * vec3(${uv}, 1.0)).xy;`;
+    }
+    const varyings = 'varying vec3 vDetpNormal;' +
+      (mapped ? '\nvarying vec3 vDetpWorld;\nvarying vec2 vDetpNormalUv;\nuniform mat3 detpNormalMapTransform;' : '');
+    shader.vertexShader = shader.vertexShader
+      .replace('#include <common>', `#include <common>\n${varyings}`)
+      .replace('#include <begin_vertex>', `#include <begin_vertex>\n${vertex}`);
+    shader.fragmentShader = shader.fragmentShader
+      .replace('#include <common>', `#include <common>\n${SHADE_GLSL}${mapped ? NORMAL_MAP_GLSL : ''}`)
+      .replace('vec4 lightMapTexel = texture2D( lightMap, vLightMapUv );', `vec4 lightMapTexel = texture2D( lightMap, vLightMapUv );
+    {
+      vec3 n = normalize(vDetpNormal);
+      if (!gl_FrontFacing) n = -n;
+      vec3 s = ${mapped ? 'detpMappedNormal(n)' : 'n'};
+      vec3 rx = texture2D(detpL1x, vLightMapUv).rgb, ry = texture2D(detpL1y, vLightMapUv).rgb;
+      vec3 rz = texture2D(detpL1z, vLightMapUv).rgb;
+      for (int c = 0; c < 3; c++) {
+        lightMapTexel[c] = detpShade(lightMapTexel[c], vec3(rx[c], ry[c], rz[c]), n, s);
+      }
+    }`);
+  };
+  material.customProgramCacheKey = () => `${SH_NAME}${mapped ? ' normal map' : ''}`;
+  material.userData.sh = true;
+  material.userData.normalMapped = mapped;
+}
+
 // --- the plugin ----------------------------------------------------------------------------------
 
 export class MozLightmap {
@@ -118,6 +220,7 @@ export class MozLightmap {
     this.parser = parser;
     this.name = NAME;
     this.textures = new Map(); // texture index -> Promise<DataTexture>, shared by materials
+    this.sh = new Map(); // glTF material index -> its DETP_lightmap_sh textures [x, y, z]
   }
 
   async imageBytes(imageIndex) {
@@ -129,13 +232,13 @@ export class MozLightmap {
     return response.arrayBuffer();
   }
 
-  loadLightmap(textureIndex, texCoord) {
-    const key = `${textureIndex}:${texCoord}`;
+  loadLightmap(textureIndex, texCoord, toHalf = rgbeToHalfFloat) {
+    const key = `${textureIndex}:${texCoord}:${toHalf.name}`;
     if (!this.textures.has(key)) {
       this.textures.set(key, (async () => {
         const textureDef = this.parser.json.textures[textureIndex];
         const image = await decodePng(await this.imageBytes(textureDef.source));
-        const texture = new DataTexture(rgbeToHalfFloat(image), image.width, image.height, RGBAFormat, HalfFloatType);
+        const texture = new DataTexture(toHalf(image), image.width, image.height, RGBAFormat, HalfFloatType);
         // glTF's UV origin is the image's top-left and decodePng returns the top row first.
         texture.flipY = false;
         texture.colorSpace = LinearSRGBColorSpace;
@@ -163,6 +266,11 @@ export class MozLightmap {
     params.lightMap = await this.loadLightmap(ext.index, ext.texCoord ?? 0);
     // three.js reads a lightMap as irradiance E and shows albedo × E / π; ours hold E/π already.
     params.lightMapIntensity = Math.PI * (ext.intensity ?? 1);
+    const sh = this.parser.json.materials[materialIndex].extensions?.[SH_NAME];
+    if (!sh) return;
+    if (sh.encoding !== 'L1/L0 8-bit') throw new Error(`${SH_NAME}: unsupported encoding '${sh.encoding}'`);
+    this.sh.set(materialIndex, await Promise.all(
+      sh.l1.map((index) => this.loadLightmap(index, sh.texCoord ?? 1, ratioToHalfFloat))));
   }
 
   // Every lightmapped mesh gets an unlit material: base colour (factor × texture) × lightmap, as
@@ -175,7 +283,16 @@ export class MozLightmap {
         const swap = (material) => {
           const ref = this.parser.associations.get(material);
           if (ref?.materials === undefined || !this.parser.json.materials[ref.materials].extensions?.[NAME]) return material;
-          if (!unlit.has(material)) unlit.set(material, toUnlit(material));
+          if (!unlit.has(material)) {
+            // The normal map GLTFLoader loaded for the source material outlives it (dispose()
+            // frees the material's programs, not its textures); its scale is the glTF's, unflipped.
+            const def = this.parser.json.materials[ref.materials];
+            const normal = material.normalMap && def.normalTexture
+              ? { texture: material.normalMap, scale: def.normalTexture.scale ?? 1 } : null;
+            const made = toUnlit(material);
+            if (this.sh.has(ref.materials)) shadeWithSh(made, this.sh.get(ref.materials), normal);
+            unlit.set(material, made);
+          }
           return unlit.get(material);
         };
         object.material = Array.isArray(object.material) ? object.material.map(swap) : swap(object.material);

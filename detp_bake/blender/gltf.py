@@ -25,7 +25,7 @@ import bpy
 import numpy as np
 
 from ..errors import BakeError
-from ..lightmap import encoding, images
+from ..lightmap import encoding, images, sh
 from .atlas import ATLAS_UV, lightmap_of
 from .lightmaps import unwire
 from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY
@@ -35,13 +35,15 @@ ENCODING = "RGBE"
 TEMP = " (detp_bake glTF)"  # the temporary copies' names end with this
 # glTF sampler constants. Nearest: blending RGBE bytes is not blending light (a GPU's bilinear filter
 # before decoding is off by 2-5 % on average, benchmarks/encoding.py); decode four texels, then blend.
-NEAREST, CLAMP = 9728, 33071
+NEAREST, LINEAR, CLAMP = 9728, 9729, 33071
+# A --directional sh bake's L1 as three more textures per lightmap (docs/gltf.md).
+SH_EXTENSION = "DETP_lightmap_sh"
+SH_ENCODING = "L1/L0 8-bit"
+SH_SPACE = "world glTF (y up)"
 
 
-def lightmap_files(out_dir, estimator: Optional[str] = None) -> tuple[str, dict]:
-    """The estimator and {object name: EXR path} of the bake in `out_dir`, read off its report.json
-    (a comparison's: the section of `estimator`). Objects whose entries name the same EXR (an atlas)
-    share that path and so one image."""
+def _section(out_dir, estimator: Optional[str]) -> tuple[str, dict, Path]:
+    """The estimator, its section of report.json in `out_dir` and the report's path."""
     out_dir = Path(out_dir)
     path = out_dir / "report.json"
     try:
@@ -59,18 +61,57 @@ def lightmap_files(out_dir, estimator: Optional[str] = None) -> tuple[str, dict]
     estimator = estimator or next(iter(sections))
     if estimator not in sections:
         raise BakeError(f"'{path}' has no {estimator} lightmaps (it has {', '.join(map(str, sections))})")
+    return estimator, sections[estimator], path
+
+
+def _located(listed: str, out_dir) -> str:
+    """A file report.json names, or the one of that name in `out_dir` (a moved folder)."""
+    return listed if os.path.isfile(listed) else str(Path(out_dir) / os.path.basename(listed))
+
+
+def lightmap_files(out_dir, estimator: Optional[str] = None) -> tuple[str, dict]:
+    """The estimator and {object name: EXR path} of the bake in `out_dir`, read off its report.json
+    (a comparison's: the section of `estimator`). Objects whose entries name the same EXR (an atlas)
+    share that path and so one image."""
+    estimator, section, path = _section(out_dir, estimator)
     files = {}
-    for entry in sections[estimator].get("objects", []):
+    for entry in section.get("objects", []):
         exr = [p for p in entry.get("files", []) if p.endswith(f".{estimator}.exr") and not p.endswith(".raw.exr")]
         if not exr:
             raise BakeError(f"object '{entry['name']}' has no EXR lightmap in '{path}': bake with the exr format")
-        found = exr[0] if os.path.isfile(exr[0]) else str(out_dir / os.path.basename(exr[0]))  # a moved folder
+        found = _located(exr[0], out_dir)
         if not os.path.isfile(found):
             raise BakeError(f"lightmap '{exr[0]}' of object '{entry['name']}' is missing")
         files[entry["name"]] = found
     if not files:
         raise BakeError(f"'{path}' lists no baked objects")
     return estimator, files
+
+
+def sh_files(out_dir, estimator: str) -> dict:
+    """{lightmap EXR path: (L1x, L1y, L1z EXR paths)} of the objects whose report entry lists all three
+    per-axis files of a `--directional sh` bake; empty for any other bake."""
+    _, section, _ = _section(out_dir, estimator)
+    found = {}
+    for entry in section.get("objects", []):
+        listed = entry.get("files", [])
+        exr = [p for p in listed if p.endswith(f".{estimator}.exr") and not p.endswith(".raw.exr")]
+        axes = [next((p for p in listed if p.endswith(f".{estimator}.{a}.exr")), None) for a in sh.AXIS_FILES]
+        if exr and all(axes):
+            paths = [_located(p, out_dir) for p in axes]
+            missing = [p for p in paths if not os.path.isfile(p)]
+            if missing:
+                raise BakeError(f"L1 map '{missing[0]}' of object '{entry['name']}' is missing")
+            found[_located(exr[0], out_dir)] = tuple(paths)
+    return found
+
+
+def sh_pngs(exr: str, axes: tuple) -> list:
+    """The three DETP_lightmap_sh PNGs of one lightmap: L1/L0 per glTF axis. glTF is y up: its
+    (x, y, z) is Blender's (x, z, −y), as the exporter writes POSITION."""
+    l0 = images.read_image(exr)[::-1][..., :3]
+    x, y, z = (images.read_image(a)[::-1][..., :3] for a in axes)
+    return [encoding.png_bytes(encoding.ratio_encode(l0, l1)) for l1 in (x, z, -y)]
 
 
 def _targets(bl_scene, files: dict, uv_layer) -> dict:
@@ -111,6 +152,7 @@ def export_gltf(bl_scene, out_dir, path, estimator: Optional[str] = None, uv_lay
     pngs = {exr: encoding.png_bytes(encoding.rgbe_encode(images.read_image(exr)[::-1]))
             for exr in dict.fromkeys(files.values())}
     state = _State(pngs)
+    state.sh = {exr: sh_pngs(exr, axes) for exr, axes in sh_files(out_dir, estimator).items() if exr in pngs}
     with _prepared(targets, files, state), _listed_as_addon():
         result = bpy.ops.export_scene.gltf(
             filepath=str(path), export_format="GLB", use_active_scene=True, use_renderable=True,
@@ -120,8 +162,10 @@ def export_gltf(bl_scene, out_dir, path, estimator: Optional[str] = None, uv_lay
     if state.errors or missed or "FINISHED" not in result:
         raise BakeError(f"glTF export of '{path}' failed: " +
                         "; ".join(state.errors or [f"no lightmap on material {', '.join(missed)}"]))
-    log(f"exported {path} with {len(pngs)} {estimator} lightmaps on {len(targets)} objects")
-    return {"gltf": str(path), "estimator": estimator, "objects": sorted(files), "images": len(pngs)}
+    log(f"exported {path} with {len(pngs)} {estimator} lightmaps on {len(targets)} objects"
+        + (f", SH L1 maps of {len(state.sh)} ({SH_EXTENSION})" if state.sh else ""))
+    return {"gltf": str(path), "estimator": estimator, "objects": sorted(files), "images": len(pngs),
+            **({"sh": len(state.sh)} if state.sh else {})}
 
 
 class _State:
@@ -134,7 +178,9 @@ class _State:
         self.pairs = {}  # (user's material name, EXR path) -> temporary material name
         self.gltf_names = {}  # temporary material or mesh name -> the name the glTF shows
         self.textures = {}  # EXR path -> glTF texture, made once
+        self.sh = {}  # EXR path -> the three L1/L0 PNGs (x, y, z in glTF's axes) of a --directional sh bake
         self.sampler = None  # the one sampler all lightmaps share
+        self.linear = None  # the L1/L0 maps' sampler: ratios may be blended
         self.done, self.errors = set(), []
 
 
@@ -156,6 +202,8 @@ class glTF2ExportUserExtension:
             if gltf_material.extensions is None:
                 gltf_material.extensions = {}
             gltf_material.extensions[EXTENSION] = _extension(state, exr)
+            if exr in state.sh:
+                gltf_material.extensions[SH_EXTENSION] = _sh_extension(state, exr)
             state.done.add(name)
         except Exception as exc:  # noqa: BLE001 (the exporter would hide it)
             state.errors.append(f"material '{name}': {exc!r}")
@@ -185,6 +233,28 @@ def _extension(state: _State, exr: str):
                                                          sampler=state.sampler, source=image)
     return Extension(name=EXTENSION, required=False, extension={
         "index": texture, "texCoord": 1, "intensity": 1.0, "extras": {"encoding": ENCODING}})
+
+
+def _sh_extension(state: _State, exr: str):
+    """DETP_lightmap_sh of a material: its lightmap's three L1/L0 textures, made once per lightmap."""
+    from io_scene_gltf2.io.com import gltf2_io
+    from io_scene_gltf2.io.com.gltf2_io_extensions import Extension
+    from io_scene_gltf2.io.exp.binary_data import BinaryData
+    if state.linear is None:
+        state.linear = gltf2_io.Sampler(extensions=None, extras=None, mag_filter=LINEAR, min_filter=LINEAR,
+                                        name=None, wrap_s=CLAMP, wrap_t=CLAMP)
+    textures = []
+    for axis, png in zip("xyz", state.sh[exr]):
+        key = (exr, axis)
+        if key not in state.textures:
+            stem = f"{os.path.basename(exr)[:-len('.exr')]}.L1{axis}"
+            image = gltf2_io.Image(buffer_view=BinaryData(png), extensions=None, extras=None,
+                                   mime_type="image/png", name=stem, uri=None)
+            state.textures[key] = gltf2_io.Texture(extensions=None, extras=None, name=stem,
+                                                   sampler=state.linear, source=image)
+        textures.append(state.textures[key])
+    return Extension(name=SH_EXTENSION, required=False, extension={
+        "l1": textures, "texCoord": 1, "encoding": SH_ENCODING, "space": SH_SPACE})
 
 
 @contextlib.contextmanager

@@ -7,6 +7,10 @@ Decoding is exactly c = byte · 2^(E − 136), and E = 0 is black. Each channel 
 mantissa step, at most 1/255.5 (0.39 %) of the texel's largest channel; negative light is stored as 0. The image must be read
 unpremultiplied (alpha is an exponent, not a coverage).
 
+The SH L1 maps of a `--directional sh` bake go along as ratios r = L1ₐ/L0 per axis and colour
+channel (`ratio_encode`): |L1| ≤ L0 bounds r to [−1, 1] whatever the light's brightness, so 8 bits
+store it to within 1/255 with no exponent, and the viewer multiplies back by the decoded L0.
+
 The other encodings here (RGBM, 16-bit linear, 8-bit sRGB under an exposure) exist to measure
 against (benchmarks/encoding.py); `lit_error` is the measure.
 """
@@ -48,6 +52,22 @@ def rgbe_decode(rgbe: np.ndarray) -> np.ndarray:
     e = rgbe[..., 3].astype(np.int32)
     scale = np.where(e == 0, 0.0, np.ldexp(1.0, e - BIAS - MANTISSA))
     return (rgbe[..., :3].astype(np.float64) * scale[..., None]).astype(np.float32)
+
+
+def ratio_encode(l0: np.ndarray, l1: np.ndarray) -> np.ndarray:
+    """One axis of L1 over L0, each (…, 3) → uint8 (…, 3): round((r + 1)/2 · 255) with r = L1ₐ/L0
+    clamped to [−1, 1] and 0 where L0 ≤ 0 (no light there: no direction to keep)."""
+    l0 = np.nan_to_num(np.asarray(l0, np.float64)[..., :3])
+    l1 = np.nan_to_num(np.asarray(l1, np.float64)[..., :3])
+    lit = l0 > 0.0
+    r = np.clip(np.where(lit, l1 / np.where(lit, l0, 1.0), 0.0), -1.0, 1.0)
+    return np.rint((r + 1.0) * 127.5).astype(np.uint8)
+
+
+def ratio_decode(q: np.ndarray) -> np.ndarray:
+    """uint8 from `ratio_encode` → float32 r = q/127.5 − 1, within 1/255 of the clamped ratio (half
+    a step; r = 0 itself lands on 128, 1/255 off)."""
+    return (np.asarray(q).astype(np.float64) / 127.5 - 1.0).astype(np.float32)
 
 
 def rgbm_roundtrip(rgb: np.ndarray, scale: float) -> np.ndarray:
@@ -93,16 +113,16 @@ def lit_error(reference: np.ndarray, decoded: np.ndarray) -> dict:
 
 
 def png_bytes(pixels: np.ndarray) -> bytes:
-    """uint8 (h, w, 4) as an RGBA PNG, row 0 at the top. Written here rather than by an image
-    library, which would take the alpha for coverage and change the colours."""
+    """uint8 (h, w, 4) as an RGBA PNG, or (h, w, 3) as an RGB one, row 0 at the top. Written here
+    rather than by an image library, which would take the alpha for coverage and change the colours."""
     pixels = np.ascontiguousarray(pixels, np.uint8)
     h, w, c = pixels.shape
-    if c != 4:
-        raise ValueError("png_bytes wants RGBA pixels")
-    rows = np.concatenate([np.zeros((h, 1), np.uint8), pixels.reshape(h, w * 4)], axis=1)
+    if c not in (3, 4):
+        raise ValueError("png_bytes wants RGBA or RGB pixels")
+    rows = np.concatenate([np.zeros((h, 1), np.uint8), pixels.reshape(h, w * c)], axis=1)
 
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-    header = struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0)
+    header = struct.pack(">IIBBBBB", w, h, 8, 6 if c == 4 else 2, 0, 0, 0)
     return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(rows.tobytes(), 6))
             + chunk(b"IEND", b""))
