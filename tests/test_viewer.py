@@ -131,7 +131,7 @@ def _render_in_blender(bpy, baked: Path, report: dict, out: Path) -> None:
     bpy.ops.wm.open_mainfile(filepath=str(baked))
     scene = bpy.context.scene
     files = {o["name"]: o["files"] for o in report["objects"]}
-    apply_all(scene, files, None, report["estimator"])
+    apply_all(scene, files, None, report["estimator"]["name"])  # report.json: {"name": …, counters}
     for mat in bpy.data.materials:
         nodes = mat.node_tree.nodes if mat.node_tree else None
         frame = nodes.get("detp_bake lightmap") if nodes else None

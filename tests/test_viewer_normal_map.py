@@ -98,8 +98,6 @@ def test_the_viewer_shades_the_normal_texture_like_blenders_sh_nodes(bpy, tmp_pa
     assert [m.get("normalTexture") is not None for m in doc["materials"]] == [True]
 
     report = json.loads((out / "report.json").read_text())
-    if isinstance(report["estimator"], dict):  # Apply names the files by the estimator's name
-        report["estimator"] = report["estimator"]["name"]
     _render_in_blender(bpy, baked, report, tmp_path / "blender.png")
     with _Server(tmp_path) as base:
         result = _shot(f"{base}/viewer/index.html?model=/model/{glb.name}&exposure={EXPOSURE}&shot=1",
