@@ -133,6 +133,7 @@ class _Pipeline:
     estimator's lightmaps. Each stage leaves what the next needs on the object."""
 
     def __init__(self, scene, settings, names, progress, cancel, cluster, frame_state, stop, preview):
+        memory.reset_peak()  # report.json's peak is this bake's
         self.names = list(dict.fromkeys(names))
         settings = _wide(settings)
         for name in self.names:
