@@ -247,6 +247,9 @@ def test_a_scheduler_and_workers_of_their_own_survive_a_killed_worker(tmp_path, 
         worker(0)
         if second == "before":
             worker(1)
+            from distributed import Client
+            with Client(address) as watcher:  # both are in before the bake starts (a loaded machine is slow)
+                watcher.wait_for_workers(2)
         args = [sys.executable, "-m", "detp_bake", "bake", str(CORNELL), "--objects", "Floor", "TallBox",
                 "--photons", "2000000" if second == "before" else "8000000", "--resolution", "16", "--no-denoise",
                 "--connect-timeout", "60"]
