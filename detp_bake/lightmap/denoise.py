@@ -9,10 +9,14 @@ kept and the gutter is filled again from the denoised ones.
 
 OIDN runs on the CPU device through `pyoidn` (a cffi binding that ships the OIDN 2.5.1 libraries).
 It is imported only when a denoise is asked for, so a bake without denoising never needs it.
-Each lightmap gets its own filter, released when done: OIDN's scratch (about 560 bytes a pixel
-untiled, measured at 512²-2048²) is bounded by MAX_MEMORY_MB, which makes OIDN denoise in
-overlapping tiles (the output is the same, bit for bit, at 1024² and 2048²), and none of it stays
-after the bake. pyoidn's one-call `denoise` keeps its filter and images until the next call.
+Each lightmap gets its own filter, released when done, and none of OIDN's scratch stays after the
+bake (pyoidn's one-call `denoise` keeps its filter and images until the next call). OIDN holds
+about 555 bytes a pixel of scratch untiled, and its own tiling (maxMemoryMB) never brings that
+under about 330 MB (measured at 768²-2048²: 420 MB at 2048²). So an image wider than TILE is
+denoised here in tiles of at most TILE², each with TILE_OVERLAP texels of context on every side
+(OIDN's own tile overlap: round_up(receptive field / 2, alignment) = 112), all at the exposure
+OIDN would find for the whole image (`_exposure`): the result equals the whole image's within
+2e-6 of its mean (measured at 1024²), and OIDN's scratch stays near 146 MB.
 
 Measured here (smooth point-light field over three charts, relative RMSE against the field, mean
 of 3 seeds at 128², 1 seed at 512²): with white noise of 10 % / 20 %, RTLightmap gives
@@ -49,7 +53,10 @@ FILTERS = ("RT", "RTLightmap")
 # smooth continuation hardly changes the chart's texels; a ring costs ~10 ms at 512² here.
 FILL_RINGS = 16
 MIN_REGION = 64  # texels: a region walled off from its neighbours is denoised only from this size
-MAX_MEMORY_MB = 256  # OIDN's maxMemoryMB: it keeps near it (330 MB measured at 2048²) whatever the size
+MAX_MEMORY_MB = 256  # OIDN's maxMemoryMB: more than a TILE² tile needs untiled (146 MB)
+TILE = 512  # the widest image OIDN gets at once (module docstring)
+TILE_OVERLAP = 112  # context on each side of a tile: OIDN's own overlap, so tiles leave no seam
+LUMA = np.array([0.212671, 0.715160, 0.072169], np.float32)  # OIDN's luminance weights (autoexposure)
 QUALITY = {"high": 6, "balanced": 5, "fast": 4}  # OIDN_QUALITY_*
 
 
@@ -121,7 +128,7 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
                      normal: Optional[np.ndarray] = None, filter: Optional[str] = None,
                      keep_energy: bool = True, margin: int = 16, quality: str = "high",
                      weights: Optional[np.ndarray] = None, regions: Optional[np.ndarray] = None,
-                     fragments=None, apart: int = 1) -> np.ndarray:
+                     fragments=None, apart: int = 1, own: bool = False) -> np.ndarray:
     """Denoise one lightmap and return a new (H, W, 3) float32 image in the same layout.
 
     image: (H, W, 3) irradiance E/π (HDR, ≥ 0), row 0 at the bottom as in texels.py; only the
@@ -148,6 +155,9 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     fragments: the texels of charts too narrow for OIDN and their neighbours on the surface
     (fragments.Fragments): they are gutter to every OIDN run, and take their neighbours' mean.
     apart: regions within this many texels are denoised in different runs (`region_runs`).
+    own: `image` is the caller's to lose (a float32 temporary of the bake): when one OIDN run covers
+    the lightmap, the denoiser works in it and returns OIDN's output image as the result, instead
+    of two more copies of the image (at 2048² each is 50 MB).
 
     Raises BakeError for a bad shape or filter, NaN/inf in covered texels, a missing pyoidn, or
     an OIDN failure.
@@ -171,23 +181,30 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
         raise BakeError("denoise: the RTLightmap filter takes no albedo or normal guide; use RT")
     if quality not in QUALITY:
         raise BakeError(f"denoise: unknown quality {quality!r} (choose from {', '.join(QUALITY)})")
-    result = np.zeros_like(image)
-    runs_mask = mask
+    runs_mask, smoothed = mask, None
     if fragments is not None and len(fragments):
         runs_mask = mask.copy()
         runs_mask.flat[fragments.pixel] = False
         covered = _covered("lightmap", image, mask)
         np.maximum(covered, 0.0, out=covered)
-        result.reshape(-1, 3)[fragments.pixel] = fragments.smooth(covered)
+        smoothed = fragments.smooth(covered)
         del covered
-    for box, part, network in region_runs(regions, runs_mask, apart):
-        pick = lambda a: None if a is None else a[box]  # noqa: E731
-        if network:
-            result[box][part] = _denoise_part(image[box], part, pick(albedo), pick(normal), filter, keep_energy,
-                                              QUALITY[quality], pick(weights))
-        else:
-            w = None if weights is None or not weights[box][part].sum() > 0 else weights[box][part]
-            result[box][part] = np.average(np.maximum(image[box][part], 0.0), axis=0, weights=w)
+    runs = region_runs(regions, runs_mask, apart)
+    if own and len(runs) == 1 and runs[0][2]:  # one OIDN run over the whole image, in `image` itself
+        result = _denoise_part(image, runs[0][1], albedo, normal, filter, keep_energy, QUALITY[quality], weights,
+                               own=True)
+    else:
+        result = np.zeros_like(image)
+        for box, part, network in runs:
+            pick = lambda a: None if a is None else a[box]  # noqa: E731
+            if network:
+                result[box][part] = _denoise_part(image[box], part, pick(albedo), pick(normal), filter, keep_energy,
+                                                  QUALITY[quality], pick(weights))
+            else:
+                w = None if weights is None or not weights[box][part].sum() > 0 else weights[box][part]
+                result[box][part] = np.average(np.maximum(image[box][part], 0.0), axis=0, weights=w)
+    if smoothed is not None:
+        result.reshape(-1, 3)[fragments.pixel] = smoothed
     return dilate(result, mask, margin, in_place=True)
 
 
@@ -243,22 +260,36 @@ def region_runs(regions: Optional[np.ndarray], mask: np.ndarray, reach: int = 1)
     return runs
 
 
-def _denoise_part(image, mask, albedo, normal, filter, keep_energy, quality, weights) -> np.ndarray:
+def _zero_gutter(name: str, a: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """`_covered` in `a` itself: its gutter set to 0 (NaN or inf in covered texels refused)."""
+    bad = ~np.isfinite(a)
+    bad[~mask] = False
+    if bad.any():
+        raise BakeError(f"denoise: the {name} holds NaN or infinite values in covered texels")
+    del bad
+    a[~mask] = 0.0
+    return a
+
+
+def _texel_weights(weights, mask) -> Optional[np.ndarray]:
+    """The covered texels' weights for a mean (float64), or None for a plain mean; made when
+    needed rather than kept through OIDN's run (8 bytes a texel)."""
+    w = None if weights is None else np.asarray(weights, np.float64)[mask]
+    return w if w is not None and w.sum() > 0 else None
+
+
+def _denoise_part(image, mask, albedo, normal, filter, keep_energy, quality, weights, own=False) -> np.ndarray:
     """The denoised values of the texels of `mask` ((K, 3) float32, in mask order), every other
-    texel taken for gutter."""
+    texel taken for gutter. `own` (denoise_lightmap): work in `image` and return the whole image,
+    the texels of `mask` denoised and 0 elsewhere."""
     # Irradiance is never negative; OIDN's HDR mode assumes so. Buffers are reused in place
     # (the same numbers): at 2048² each (H, W, 3) copy is 50 MB.
-    src = _covered("lightmap", image, mask)
+    src = _zero_gutter("lightmap", image, mask) if own else _covered("lightmap", image, mask)
     np.maximum(src, 0.0, out=src)
     covered = src[mask]
     if not covered.any():  # all black stays black: OIDN returns up to 0.03 for an all-0 input
-        return np.zeros_like(covered)
-    w = raw_mean = None
-    if keep_energy:
-        w = None if weights is None else np.asarray(weights, np.float64)[mask]
-        if w is not None and not w.sum() > 0:
-            w = None
-        raw_mean = np.average(covered, axis=0, weights=w)
+        return src if own else np.zeros_like(covered)
+    raw_mean = np.average(covered, axis=0, weights=_texel_weights(weights, mask)) if keep_energy else None
     del covered
 
     color = fill_gutter(src, mask, in_place=True)
@@ -276,60 +307,103 @@ def _denoise_part(image, mask, albedo, normal, filter, keep_energy, quality, wei
     except (RuntimeError, ValueError, TypeError, OSError) as exc:  # OSError: OIDN's .so loads now
         raise BakeError(f"denoise: OIDN failed on a {image.shape[1]}x{image.shape[0]} lightmap "
                         f"({filter}): {exc}") from exc
-    del color, kwargs
+    del color, kwargs, image
     den = result[mask]
     if not np.isfinite(den).all():
         raise BakeError(f"denoise: OIDN returned non-finite texels ({filter})")
     np.maximum(den, 0.0, out=den)
     if keep_energy:
-        den_mean = np.average(den, axis=0, weights=w)
+        den_mean = np.average(den, axis=0, weights=_texel_weights(weights, mask))
         scale = np.where(den_mean > 0, raw_mean / np.where(den_mean > 0, den_mean, 1.0), 1.0)
         np.multiply(den, scale, out=den, casting="unsafe")  # in float64, rounded once to float32
-    return den
+    if not own:
+        return den
+    result[~mask] = 0.0
+    result[mask] = den
+    return result
 
 
 _device = None
 
 
-def _run_filter(color: np.ndarray, filter: str, quality: int, hdr: bool = False, clean_aux: bool = False,
-                albedo: Optional[np.ndarray] = None, normal: Optional[np.ndarray] = None) -> np.ndarray:
-    """OIDN on one image: a filter of its own, its scratch bounded (MAX_MEMORY_MB) and released
-    on return. The CPU device is made once (bakes run one at a time: job.py). (OIDN could write
-    its output over `color`, with the same bytes, but its peak at 2048² stays the same.)"""
+def _device_once():
+    """OIDN's CPU device, made once (bakes run one at a time: job.py)."""
     global _device
     pyoidn = _pyoidn()
-
-    def check(what):
-        err = _device.get_error()
-        if err:
-            raise RuntimeError(f"{what}: {err}")
-
     if _device is None:
         device = pyoidn.Device()
         device.commit()
         _device = device
-        check("device")
-    images = {"color": np.ascontiguousarray(color, np.float32)}
-    if albedo is not None:
-        images["albedo"] = np.ascontiguousarray(albedo, np.float32)
-    if normal is not None:
-        images["normal"] = np.ascontiguousarray(normal, np.float32)
-    images["output"] = out = np.empty_like(images["color"])
-    flt = pyoidn.Filter(_device, filter)
+        _check("device")
+    return _device
+
+
+def _check(what: str) -> None:
+    err = _device.get_error()
+    if err:
+        raise RuntimeError(f"{what}: {err}")
+
+
+def _exposure(color: np.ndarray) -> float:
+    """The input scale OIDN's autoexposure finds for the whole image: 0.18 over the geometric mean
+    of the luminance of 16×16 blocks (blocks of mean luminance above 1e-8). Tiles denoised apart
+    all get it, so each sees the exposure the whole image would have had."""
+    h, w = color.shape[:2]
+    rows = np.arange(-(-h // 16)) * h // -(-h // 16)
+    cols = np.arange(-(-w // 16)) * w // -(-w // 16)
+    lum = np.add.reduceat(color @ LUMA, rows, axis=0, dtype=np.float64)
+    lum = np.add.reduceat(lum, cols, axis=1) / np.outer(np.diff(rows, append=h), np.diff(cols, append=w))
+    bright = lum[lum > 1e-8]
+    return float(0.18 / np.exp2(np.log2(bright).mean())) if bright.size else 1.0
+
+
+def _spans(n: int) -> list:
+    """[(start, stop)] cores of one axis, even in size, none wider than TILE less its overlaps."""
+    count = -(-n // (TILE - 2 * TILE_OVERLAP))
+    edges = np.arange(count + 1) * n // count
+    return list(zip(edges[:-1].tolist(), edges[1:].tolist()))
+
+
+def _run_filter(color: np.ndarray, filter: str, quality: int, hdr: bool = False, clean_aux: bool = False,
+                albedo: Optional[np.ndarray] = None, normal: Optional[np.ndarray] = None) -> np.ndarray:
+    """OIDN on one image, in tiles when it is wider than TILE (module docstring), through one
+    filter released on return."""
+    pyoidn = _pyoidn()
+    device = _device_once()
+    guides = {name: img for name, img in (("albedo", albedo), ("normal", normal)) if img is not None}
+    h, w = color.shape[:2]
+    flt = pyoidn.Filter(device, filter)
     try:
-        check("filter")
-        for name, img in images.items():
-            flt.set_image(name, img, pyoidn.OIDN_FORMAT_FLOAT3)
+        _check("filter")
         if filter == "RT":
             flt.set_bool("hdr", hdr)
             flt.set_bool("cleanAux", clean_aux)
         flt.set_int("quality", quality)
         flt.set_int("maxMemoryMB", MAX_MEMORY_MB)
-        flt.commit()
-        check("commit")
-        flt.execute()
-        check("execute")
+        if h <= TILE and w <= TILE:
+            return _execute(flt, pyoidn, color, guides)
+        flt.set_float("inputScale", _exposure(color))
+        out = np.empty(color.shape, np.float32)
+        for r0, r1 in _spans(h):
+            for c0, c1 in _spans(w):
+                rows = slice(max(r0 - TILE_OVERLAP, 0), min(r1 + TILE_OVERLAP, h))
+                cols = slice(max(c0 - TILE_OVERLAP, 0), min(c1 + TILE_OVERLAP, w))
+                tile = _execute(flt, pyoidn, color[rows, cols], {k: g[rows, cols] for k, g in guides.items()})
+                out[r0:r1, c0:c1] = tile[r0 - rows.start:r1 - rows.start, c0 - cols.start:c1 - cols.start]
+        return out
     finally:
         flt.release()
-    return out
 
+
+def _execute(flt, pyoidn, color: np.ndarray, guides: dict) -> np.ndarray:
+    """One execution of `flt` on `color` (and its guides) into a new image."""
+    images = {"color": np.ascontiguousarray(color, np.float32)}
+    images.update((name, np.ascontiguousarray(img, np.float32)) for name, img in guides.items())
+    images["output"] = out = np.empty_like(images["color"])
+    for name, img in images.items():
+        flt.set_image(name, img, pyoidn.OIDN_FORMAT_FLOAT3)
+    flt.commit()
+    _check("commit")
+    flt.execute()
+    _check("execute")
+    return out

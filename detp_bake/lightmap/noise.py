@@ -46,23 +46,28 @@ class BatchNoise:
         self.weight = share
         self.groups += 1
 
-    def variance(self) -> np.ndarray:
-        """Per texel, the variance of the bake's estimate X (luminance); NaN before two groups."""
+    def variance(self, start: int = 0, stop=None) -> np.ndarray:
+        """Per texel of start:stop, the variance of the bake's estimate X (luminance); NaN before
+        two groups."""
+        previous = self.previous[start:stop]
         if self.groups < 2:
-            return np.full(len(self.previous), np.nan)
-        mean = self.previous / self.weight
-        spread = np.maximum(self.sum_wx2 - self.weight * mean * mean, 0.0)
+            return np.full(len(previous), np.nan)
+        mean = previous / self.weight
+        spread = np.maximum(self.sum_wx2[start:stop] - self.weight * mean * mean, 0.0)
         return spread / ((self.groups - 1) * self.weight)
 
-    def relative(self, lightmaps, total: np.ndarray, scale: float = 1.0) -> dict:
-        """{object name: relative noise} of each lightmap; `total` (N, 3) times `scale` is the full
-        estimate (direct + indirect) the noise is relative to (scale: no scaled copy of it)."""
-        var = self.variance()
-        lum = np.mean(total, axis=1, dtype=np.float64)
-        lum *= scale
+    def relative(self, lightmaps, luminance, chunk: int = 1 << 20) -> dict:
+        """{object name: relative noise} of each lightmap. `luminance(start, stop)`: the full
+        estimate's (direct + indirect) mean over channels at texels start:stop, float64, which the
+        noise is relative to. Chunk by chunk: no temporaries the size of the bake (at 2048² the
+        noise is read after every block of batches, and a whole-bake float64 RGB copy is 80 MB)."""
         out = {}
         for lm in lightmaps:
-            sl = lm.texels
-            mean = float(lum[sl].mean()) if lm.count else 0.0
-            out[lm.name] = float(np.sqrt(np.mean(var[sl])) / mean) if mean > 0.0 else 0.0
+            spread = level = 0.0
+            for start in range(lm.offset, lm.offset + lm.count, chunk):
+                stop = min(start + chunk, lm.offset + lm.count)
+                spread += float(self.variance(start, stop).sum())
+                level += float(np.sum(luminance(start, stop)))
+            mean = level / lm.count if lm.count else 0.0
+            out[lm.name] = float(np.sqrt(spread / lm.count) / mean) if mean > 0.0 else 0.0
         return out

@@ -33,7 +33,7 @@ from ..transport.photons import PhotonTracer
 from ..rays import RayCaster
 from ..scene import Scene
 from .batches import BLOCKS, Partial, Totals, TraceJob, blocks, trace_batches, worker_bytes  # noqa: F401 (the API)
-from .results import BakeResult, Progress, Snapshot, cancel_fn, preview_images, si  # noqa: F401 (the API)
+from .results import BakeResult, Progress, RawImages, Snapshot, cancel_fn, preview_images, si  # noqa: F401 (the API)
 from .settings import BakeSettings  # noqa: F401 (the API)
 from .writing import output_paths, warn_stale, write, write_many  # noqa: F401 (the API)
 
@@ -133,6 +133,7 @@ class _Pipeline:
     estimator's lightmaps. Each stage leaves what the next needs on the object."""
 
     def __init__(self, scene, settings, names, progress, cancel, cluster, frame_state, stop, preview):
+        memory.return_large_blocks()  # freed arrays go back to the system (glibc)
         memory.reset_peak()  # report.json's peak is this bake's
         self.names = list(dict.fromkeys(names))
         settings = _wide(settings)
@@ -304,9 +305,8 @@ class _Pipeline:
                 for name in noise:
                     noise[name].update(totals.sums[name]["irradiance"], share)
                 if primary in noise and noise[primary].groups >= 2:
-                    direct_now = 0.0 if direct_at is None else direct_at
-                    self.current = noise[primary].relative(self.at.lightmaps, direct_now + noise[primary].previous[
-                        :, None] / max(share, 1e-300))
+                    self.current = noise[primary].relative(self.at.lightmaps,
+                                                           partial(_luminance_so_far, direct_at, noise[primary], share))
                 trace_progress(totals.stats.photons)
                 self.check_cancel()
                 self._show(totals, share)
@@ -389,12 +389,20 @@ class _Pipeline:
         seconds = {"rasterise": self.rasterise_seconds, "validity": self.validity_seconds,
                    "direct": self.direct_info.get("seconds", 0.0), "clearance": self.clearance_seconds,
                    "build": self.build[name], "trace": self.tracer.stats.seconds, "estimate": self.spent[name]}
-        # An estimate with white noise is denoised apart from the direct light (denoise.py).
-        apart = None if self.direct_e is None or not kind.for_denoiser else self.direct_e
-        sharp = None if apart is None else self.sharp_e
+        # The noise sums go before the images are made (two float64s a texel).
+        noise = self.noise.pop(name, None)
+        if noise is not None:
+            noise = noise.relative(self.at.lightmaps, partial(_luminance, self.sites.of_sites(value), np.pi))
+        # An estimate with white noise is denoised apart from the direct light (denoise.py). The
+        # last estimator of a plain bake takes the direct light over: nothing after it reads it.
+        apart = [None if self.direct_e is None or not kind.for_denoiser else self.direct_e]
+        sharp = None if apart[0] is None else self.sharp_e
+        denoised_apart = apart[0] is not None
+        if name == self.names[-1] and l1 is None:
+            self.direct_e = None
         result = _finish(replace(settings, estimator=name), self.bounces, self.texels, value, out.counters,
                          self.tracer, seconds, self.direct_info, apart, self.regions, sharp, self.fragments_of)
-        result.direct["denoised_apart"] = apart is not None and bool(result.raw_images)
+        result.direct["denoised_apart"] = denoised_apart and bool(result.raw_images)
         result.direct["sharp_kept"] = sharp is not None and bool(result.raw_images)
         apart = sharp = out = value = None
         if self.mask is not None:
@@ -407,14 +415,14 @@ class _Pipeline:
         result.stopped_by, result.share = self.stopped_by, share
         result.export = dict(getattr(self.scene, "export_stats", None) or {})
         result.cluster = dict(self.cluster.last) if self.cluster is not None else {}
-        self._report_noise(name, kind, result)
+        self._report_noise(kind, result, noise)
         return result
 
-    def _report_noise(self, name, kind, result) -> None:
-        """The result's noise, warnings and memory figures."""
+    def _report_noise(self, kind, result, noise) -> None:
+        """The result's noise (`noise`: measured from its batches, or None), warnings and memory figures."""
         settings, at = self.settings, self.at
-        if name in self.noise:
-            result.noise = self.noise[name].relative(at.lightmaps, self.sites.of_sites(result.value), scale=np.pi)
+        if noise is not None:
+            result.noise = noise
         elif kind.fixed_noise(settings.estimator_settings) is not None:
             fixed = kind.fixed_noise(settings.estimator_settings)
             result.noise = {lm.name: fixed for lm in self.texels.lightmaps}
@@ -476,6 +484,22 @@ def indirect_spacing(settings: BakeSettings, frame_state=None) -> int:
     return int(settings.indirect_spacing)
 
 
+def _luminance(per_texel, scale, start, stop) -> np.ndarray:
+    """The mean over channels of rows start:stop of `per_texel` times `scale`, in float64."""
+    lum = np.mean(per_texel[start:stop], axis=1, dtype=np.float64)
+    lum *= scale
+    return lum
+
+
+def _luminance_so_far(direct_at, noise, share, start, stop) -> np.ndarray:
+    """The luminance of the bake so far at sites start:stop: the direct light and the indirect
+    sums scaled to the whole bake (`share` of it traced), for the noise shown while tracing."""
+    lum = noise.previous[start:stop] / max(share, 1e-300)
+    if direct_at is not None:
+        lum += np.mean(direct_at[start:stop], axis=1, dtype=np.float64)
+    return lum
+
+
 def _snapshot_value(sites, current, direct_e, share) -> np.ndarray:
     irradiance = sites.expand(current() / share)
     return (irradiance if direct_e is None else irradiance + direct_e) / np.pi
@@ -496,13 +520,15 @@ def _value(est, direct_e, share) -> np.ndarray:
 
 def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_info=None,
             direct=None, regions=None, sharp=None, fragments_of=None) -> BakeResult:
-    """The per-texel E/π `value` as dilated (and denoised) images. `direct`: the direct irradiance E
-    in `value`, to be denoised on its own and the rest (the indirect estimate) on its own; `sharp`:
+    """The per-texel E/π `value` as dilated (and denoised) images. `direct`: [the direct irradiance E
+    in `value`, or None], to be denoised on its own and the rest (the indirect estimate) on its own
+    (the list is emptied once the last lightmap has taken its part: whoever passes the only other
+    reference lets the array go before the last denoise); `sharp`:
     the part of `direct` from point, spot and sun lights, kept as it is (their shadow rays are exact
     away from penumbrae; docs/real_levels.md). `regions`: {object name: texels that see each other
     (validity.regions)}, each denoised apart. `fragments_of(lm)`: lightmap `lm`'s texels of charts too
     narrow for OIDN and their neighbours on the surface (fragments.find), smoothed instead."""
-    result_images, raw_images, masks, centre_masks = {}, {}, {}, {}
+    result_images, masks, centre_masks = {}, {}, {}
     warnings = []
     denoise = settings.denoise and denoise_mod.available()
     if settings.denoise and not denoise:
@@ -511,41 +537,15 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
         warnings.append(f"estimator '{settings.estimator}' without denoising: its lightmaps keep the photons' "
                         "noise texel by texel (disc_index gives smoother raw lightmaps)")
     t0 = time.perf_counter()
+    direct = [None] if direct is None else direct
     for lm in texels.lightmaps:
         pixel = texels.pixel[lm.texels]
-        img, mask = texels_mod.to_image(value[lm.texels], lm, pixel)
-        raw = texels_mod.dilate(img, mask, settings.margin)
         if denoise:
-            raw_images[lm.name] = raw
-            area, _ = texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)
-            frag = fragments_of(lm) if fragments_of is not None else None
-            counters["fragment_texels"] = counters.get("fragment_texels", 0) + (len(frag) if frag else 0)
-            denoised = partial(denoise_mod.denoise_lightmap, mask=mask, margin=settings.margin, weights=area[..., 0],
-                               regions=(regions or {}).get(lm.name), fragments=frag,
-                               apart=denoise_mod.FILL_RINGS if len(lm.members) > 1 else 1)
-            if direct is None:
-                result_images[lm.name] = denoised(img)
-            else:
-                # E/π, lightmap by lightmap: no float32 copy of the whole bake's direct light.
-                # In place where it can (img becomes the indirect part): at 2048² each image is 50 MB.
-                first, _ = texels_mod.to_image(direct[lm.texels] / np.float32(np.pi), lm, pixel)
-                rest = np.maximum(np.subtract(img, first, out=img), 0.0, out=img)
-                img = None
-                if sharp is not None:
-                    kept, _ = texels_mod.to_image(sharp[lm.texels] / np.float32(np.pi), lm, pixel)
-                    first = np.maximum(first - kept, 0.0, out=first)  # what the soft emitters gave
-                    kept = texels_mod.dilate(kept, mask, settings.margin, in_place=True)
-                if sharp is not None and lm.width * lm.height >= ONE_PASS_FROM:  # soft direct + indirect: one OIDN run
-                    rest += first
-                    first = None
-                    out = denoised(rest)
-                else:
-                    out = denoised(rest)
-                    out += denoised(first)
-                del rest, first
-                result_images[lm.name] = out if sharp is None else np.add(out, kept, out=out)
+            result_images[lm.name], mask = _denoised(settings, texels, lm, value, direct, sharp,
+                                                     (regions or {}).get(lm.name), fragments_of, counters)
         else:
-            result_images[lm.name] = raw
+            img, mask = texels_mod.to_image(value[lm.texels], lm, pixel)
+            result_images[lm.name] = texels_mod.dilate(img, mask, settings.margin, in_place=True)
         masks[lm.name] = mask
         centre_masks[lm.name] = np.zeros_like(mask)
         at_centre = texels.centre_inside[lm.texels]
@@ -554,9 +554,52 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
         centre_masks[lm.name].flat[pixel[at_centre]] = True
     if denoise:
         seconds["denoise"] = time.perf_counter() - t0
+    raw_images = RawImages(texels, value, settings.margin, result_images) if denoise else {}
     return BakeResult(settings, bounces, result_images, masks, centre_masks, texels, value, tracer.stats,
                       counters, seconds, direct=dict(direct_info or {}), raw_images=raw_images,
                       warnings=warnings)
+
+
+def _denoised(settings, texels, lm, value, direct, sharp, regions, fragments_of, counters) -> tuple:
+    """Lightmap `lm` denoised (by region, its fragments smoothed) and its mask (`_finish`). With
+    `direct` ([array]; emptied after the last lightmap took its part), the indirect part and the soft emitters' direct part are denoised apart (together
+    from ONE_PASS_FROM pixels), and the `sharp` lights' part added as the shadow rays gave it.
+    Each part is made per texel and scattered into one image the denoiser may work in, and the
+    sharp part's image only once the denoiser is done: at 2048² each image is 50 MB."""
+    pixel = texels.pixel[lm.texels]
+    area, mask = texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)
+    frag = fragments_of(lm) if fragments_of is not None else None
+    counters["fragment_texels"] = counters.get("fragment_texels", 0) + (len(frag) if frag else 0)
+    denoised = partial(denoise_mod.denoise_lightmap, mask=mask, margin=settings.margin, weights=area[..., 0],
+                       regions=regions, fragments=frag, apart=denoise_mod.FILL_RINGS if len(lm.members) > 1 else 1,
+                       own=True)
+    image = lambda values: texels_mod.to_image(values, lm, pixel)[0]  # noqa: E731
+    if direct[0] is None:
+        return denoised(image(value[lm.texels])), mask
+    # E/π per texel, in float32 as the images hold it: the indirect part (value less the direct
+    # light), and the direct light less the sharp lights' part (what the soft emitters gave).
+    per_texel = lambda a: (a[lm.texels] / np.float32(np.pi)).astype(np.float32, copy=False)  # noqa: E731
+    first = per_texel(direct[0])
+    if lm is texels.lightmaps[-1]:
+        direct[0] = None
+    rest = np.subtract(value[lm.texels], first)
+    np.maximum(rest, 0.0, out=rest)
+    if sharp is not None:
+        np.subtract(first, per_texel(sharp), out=first)
+        np.maximum(first, 0.0, out=first)
+    parts = [rest, first]  # each part's only reference: scattered, it goes
+    rest = first = None
+    if sharp is not None and lm.width * lm.height >= ONE_PASS_FROM:  # soft direct + indirect: one OIDN run
+        parts[0] += parts.pop()
+        out = denoised(image(parts.pop()))
+    else:
+        out = denoised(image(parts.pop(0)))
+        out += denoised(image(parts.pop()))
+    if sharp is not None:
+        kept = texels_mod.dilate(image(per_texel(sharp)), mask, settings.margin, in_place=True)
+        out += kept
+    return out, mask
+
 
 
 def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) -> memory.Estimate:

@@ -3,6 +3,7 @@
 run shares (a cancel callable, counts in words)."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Callable, Optional
 
@@ -22,6 +23,29 @@ class Progress:
     fraction: float
     message: str
     part: Optional[tuple] = None
+
+
+class RawImages(Mapping):
+    """object name -> a lightmap's image before denoising, made when asked from the bake's
+    per-texel values (dilated by `margin`, as the denoised image is): a bake keeps no second
+    full-size image per lightmap for the few callers that want the raw one (keep_raw, tests)."""
+
+    def __init__(self, texels, value: np.ndarray, margin: int, names):
+        self._texels, self._value, self._margin = texels, value, margin
+        self._names = [lm.name for lm in texels.lightmaps if lm.name in set(names)]
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        lm = next((lm for lm in self._texels.lightmaps if lm.name == name and name in self._names), None)
+        if lm is None:
+            raise KeyError(name)
+        img, mask = texels_mod.to_image(self._value[lm.texels], lm, self._texels.pixel[lm.texels])
+        return texels_mod.dilate(img, mask, self._margin, in_place=True)
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
 
 
 @dataclass
