@@ -52,7 +52,7 @@ REACH = 0.75  # probe length, in texel sizes: past the half-diagonal of the squa
 PUSH = 0.05  # how far past the face a moved sample point lands, in texel sizes
 STANDING = np.cos(np.radians(45.0))  # faces steeper than this against the texel's surface stand on it
 MIN_SHARE = 1.0 / 36  # the least share of its square's area a cut texel keeps
-CHUNK = 1 << 15  # texels a probe task casts rays for
+CHUNK = 1 << 13  # texels a probe task casts rays for: ~10 MB of float64 temporaries a task running
 BLOCK = 1 << 18  # texels find_cuts holds float64 sizes, normals and discs for at once
 NEIGHBOURS = 3.0  # texel sizes: neighbours in the image further apart than this are not tested (regions)
 
@@ -262,7 +262,7 @@ def _shares(texels: TexelSet, scene, cuts: Cuts) -> np.ndarray:
                                                scene.positions[:, 2] - scene.positions[:, 0]), axis=1)
     for lm in texels.lightmaps:
         sl = lightmap_triangles(scene, lm)
-        texel_of = np.full(lm.width * lm.height, -1, np.int64)
+        texel_of = np.full(lm.width * lm.height, -1, np.int32)  # 4 bytes a pixel, not 8: fewer than 2³¹ texels
         texel_of[texels.pixel[lm.texels]] = np.arange(lm.offset, lm.offset + lm.count)
         _near_areas(np.ascontiguousarray(scene.uvs[sl], np.float64), np.ascontiguousarray(scene.positions[sl], np.float64),
                     np.ascontiguousarray(world_area[sl], np.float64), lm.width, lm.height, texel_of,
@@ -344,7 +344,7 @@ def _candidates(texels: TexelSet, scene, tris: _Triangles) -> np.ndarray:
         size, g = _frames(sub, scene)
         near = tris.discs(sub.position + (LIFT * size)[:, None] * g, g, REACH * size)
         todo[a:a + len(sub)] = near & (size > 0)
-    return np.flatnonzero(todo)
+    return np.flatnonzero(todo).astype(np.int32)  # held while probing: half of int64's size
 
 
 def _probe_all(texels: TexelSet, scene, caster, todo: np.ndarray, cuts: Cuts, threads: int) -> None:
