@@ -359,8 +359,9 @@ def _probe_all(texels: TexelSet, scene, caster, todo: np.ndarray, cuts: Cuts, th
 
     points, normals = [], []
     rows = 0
+    chunks = [todo[a:a + CHUNK] for a in range(0, todo.size, CHUNK)]
     with ThreadPoolExecutor(max(1, int(threads))) as pool:
-        for idx, new_pos, inside, has, point, m in pool.map(work, [todo[a:a + CHUNK] for a in range(0, todo.size, CHUNK)]):
+        for idx, new_pos, inside, has, point, m in pool.map(work, chunks):
             texels.position[idx] = new_pos
             cuts.moved[idx] = inside
             cut = idx[has]
