@@ -33,14 +33,16 @@ between their sample points (lifted as above) is blocked. The bake denoises each
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from ..bvh import discs_meet_triangles, faces_against
+# The tree and kernels behind bvh.discs_meet_triangles and faces_against: find_cuts builds the tree
+# once and tests its texels a block at a time.
+from ..bvh import _against, _discs_meet, _triangle_tree
 from ..sampling import inline
 from .texels import TexelSet, geometric_normals, lightmap_triangles, neighbour_pairs, pixel_steps
 
@@ -50,7 +52,8 @@ REACH = 0.75  # probe length, in texel sizes: past the half-diagonal of the squa
 PUSH = 0.05  # how far past the face a moved sample point lands, in texel sizes
 STANDING = np.cos(np.radians(45.0))  # faces steeper than this against the texel's surface stand on it
 MIN_SHARE = 1.0 / 36  # the least share of its square's area a cut texel keeps
-CHUNK = 1 << 15
+CHUNK = 1 << 13  # texels a probe task casts rays for: ~10 MB of float64 temporaries a task running
+BLOCK = 1 << 18  # texels find_cuts holds float64 sizes, normals and discs for at once
 NEIGHBOURS = 3.0  # texel sizes: neighbours in the image further apart than this are not tested (regions)
 
 
@@ -259,7 +262,7 @@ def _shares(texels: TexelSet, scene, cuts: Cuts) -> np.ndarray:
                                                scene.positions[:, 2] - scene.positions[:, 0]), axis=1)
     for lm in texels.lightmaps:
         sl = lightmap_triangles(scene, lm)
-        texel_of = np.full(lm.width * lm.height, -1, np.int64)
+        texel_of = np.full(lm.width * lm.height, -1, np.int32)  # 4 bytes a pixel, not 8: fewer than 2³¹ texels
         texel_of[texels.pixel[lm.texels]] = np.arange(lm.offset, lm.offset + lm.count)
         _near_areas(np.ascontiguousarray(scene.uvs[sl], np.float64), np.ascontiguousarray(scene.positions[sl], np.float64),
                     np.ascontiguousarray(world_area[sl], np.float64), lm.width, lm.height, texel_of,
@@ -269,52 +272,140 @@ def _shares(texels: TexelSet, scene, cuts: Cuts) -> np.ndarray:
     return np.clip(near / np.maximum(texels.area[owner].astype(np.float64), 1e-300), MIN_SHARE, 1.0)
 
 
-def covered(texels: TexelSet, scene, g: np.ndarray) -> np.ndarray:
-    """Per texel, whether the front of another face lies against its point (geometric normal `g`),
-    within twice the shadow rays' offset in front of it (direct.py)."""
-    p = scene.positions.astype(np.float64)
-    facing = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    facing /= np.maximum(np.linalg.norm(facing, axis=1, keepdims=True), 1e-300)
-    shading = scene.normals.astype(np.float64).sum(axis=1)
-    facing[np.einsum("ij,ij->i", facing, shading) < 0.0] *= -1.0
-    reach = np.full(len(texels), 2.0 * scene.ray_offset())
-    return faces_against(p, facing, texels.position, g, texels.triangle, reach)
+class _Triangles:
+    """The scene's triangle tree, built once for the whole of find_cuts: its disc and face-to-face
+    tests then run block by block (bvh's public calls rebuild the tree on every call, 0.5 s a
+    million triangles)."""
+
+    def __init__(self, scene):
+        self.tri = np.ascontiguousarray(scene.positions, np.float64)
+        self.tree = _triangle_tree(self.tri) if len(self.tri) else None
+        p = self.tri
+        facing = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        facing /= np.maximum(np.linalg.norm(facing, axis=1, keepdims=True), 1e-300)
+        shading = scene.normals.astype(np.float64).sum(axis=1)
+        facing[np.einsum("ij,ij->i", facing, shading) < 0.0] *= -1.0
+        self.facing = facing
+        self.offset = scene.ray_offset()
+
+    def discs(self, origin, normal, reach) -> np.ndarray:
+        """bvh.discs_meet_triangles against the prebuilt tree."""
+        out = np.zeros(len(origin), np.bool_)
+        if self.tree is not None and len(origin):
+            lo, hi, order, left, first, count, node = self.tree
+            _discs_meet(self.tri, lo, hi, order, node, left, first, count, np.ascontiguousarray(origin, np.float64),
+                        np.ascontiguousarray(normal, np.float64), np.ascontiguousarray(reach, np.float64), out)
+        return out
+
+    def covered(self, point, g, own) -> np.ndarray:
+        """Per point (on triangle `own`, geometric normal `g`), whether the front of another face lies
+        against it, within twice the shadow rays' offset in front of it (direct.py): bvh.faces_against."""
+        out = np.zeros(len(point), np.bool_)
+        if self.tree is not None and len(point):
+            lo, hi, order, left, first, count, node = self.tree
+            _against(self.tri, self.facing, lo, hi, order, node, left, first, count,
+                     np.ascontiguousarray(point, np.float64), np.ascontiguousarray(g, np.float64),
+                     np.ascontiguousarray(own, np.int64), np.full(len(point), 2.0 * self.offset), out)
+        return out
 
 
-def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
-    """The cuts of every texel with geometry standing on its square; texels whose centre lies inside
-    a solid have their `position` moved out, in place (module docstring)."""
-    n = len(texels)
-    cuts = Cuts.none(n)
-    if n == 0:
-        return cuts
-    du, dv = pixel_steps(texels, scene)
+def _subset(texels: TexelSet, rows) -> TexelSet:
+    """Texels `rows` (a slice: views, no copies; or ascending indices) as a TexelSet whose lightmaps
+    count only them, so that the per-texel helpers (pixel_steps) run on a block at a time."""
+    if isinstance(rows, slice):
+        def before(k):
+            return min(max(k, rows.start), rows.stop) - rows.start
+    else:
+        def before(k):
+            return int(np.searchsorted(rows, k))
+    lightmaps = []
+    for lm in texels.lightmaps:
+        lo, hi = before(lm.offset), before(lm.offset + lm.count)
+        lightmaps.append(replace(lm, offset=lo, count=hi - lo))
+    return TexelSet(texels.position[rows], texels.normal[rows], texels.triangle[rows], texels.pixel[rows],
+                    texels.area[rows], texels.centre_inside[rows], lightmaps)
+
+
+def _frames(sub: TexelSet, scene) -> tuple[np.ndarray, np.ndarray]:
+    """(texel size: the mean of its two pixel steps, 0 where the UVs are degenerate; unit geometric
+    normal) of each texel of `sub`."""
+    du, dv = pixel_steps(sub, scene)
     size = 0.5 * (np.linalg.norm(du, axis=1) + np.linalg.norm(dv, axis=1))
     size = np.where(np.isfinite(size) & (size > 0), size, 0.0)
-    g = geometric_normals(scene, texels.triangle, texels.normal)
-    near = discs_meet_triangles(scene.positions, texels.position + (LIFT * size)[:, None] * g, g, REACH * size)
-    todo = np.flatnonzero(near & (size > 0))
-    if todo.size:
-        chunks = [todo[a:a + CHUNK] for a in range(0, todo.size, CHUNK)]
-        with ThreadPoolExecutor(max(1, int(threads))) as pool:
-            done = list(pool.map(lambda idx: (idx, _cut_chunk(caster, texels.position[idx], g[idx], size[idx])),
-                                 chunks))
-        points, normals = [], []
-        rows = 0
-        for idx, (new_pos, inside, has, point, m) in done:
+    return size, geometric_normals(scene, sub.triangle, sub.normal)
+
+
+def _candidates(texels: TexelSet, scene, tris: _Triangles) -> np.ndarray:
+    """The texels (ascending) with geometry near enough their square to need probe rays, found
+    BLOCK texels at a time: their float64 sizes, normals and discs never exist for all at once."""
+    todo = np.zeros(len(texels), bool)
+    for a in range(0, len(texels), BLOCK):
+        sub = _subset(texels, slice(a, min(a + BLOCK, len(texels))))
+        size, g = _frames(sub, scene)
+        near = tris.discs(sub.position + (LIFT * size)[:, None] * g, g, REACH * size)
+        todo[a:a + len(sub)] = near & (size > 0)
+    return np.flatnonzero(todo).astype(np.int32)  # held while probing: half of int64's size
+
+
+def _probe_all(texels: TexelSet, scene, caster, todo: np.ndarray, cuts: Cuts, threads: int) -> None:
+    """Probe the texels `todo` CHUNK at a time over `threads`; moves their positions, fills the cut
+    rows of `cuts` in texel order. Each chunk's results are written as it comes back and its cut rows
+    copied once into the final arrays."""
+    def work(idx):
+        sub = _subset(texels, idx)
+        size, g = _frames(sub, scene)
+        new_pos, inside, has, point, m = _cut_chunk(caster, sub.position, g, size)
+        return idx, new_pos, inside, has, point[has], m[has]
+
+    points, normals = [], []
+    rows = 0
+    chunks = [todo[a:a + CHUNK] for a in range(0, todo.size, CHUNK)]
+    with ThreadPoolExecutor(max(1, int(threads))) as pool:
+        for idx, new_pos, inside, has, point, m in pool.map(work, chunks):
             texels.position[idx] = new_pos
             cuts.moved[idx] = inside
             cut = idx[has]
             cuts.of[cut] = rows + np.arange(cut.size, dtype=np.int32)
             rows += cut.size
-            points.append(point[has])
-            normals.append(m[has])
-        cuts.point = np.concatenate(points)
-        cuts.normal = np.concatenate(normals)
-        cuts.share = np.ones(rows)
-        if rows:
-            cuts.share = _shares(texels, scene, cuts)
-    cuts.covered = covered(texels, scene, g)
+            points.append(point)
+            normals.append(m)
+    cuts.point, cuts.normal = _gather(points), _gather(normals)
+    cuts.share = np.ones(rows)
+    if rows:
+        cuts.share = _shares(texels, scene, cuts)
+
+
+def _gather(parts: list) -> np.ndarray:
+    """np.concatenate(parts), each part let go once copied: the parts and the whole are not all
+    held at once."""
+    out = np.empty((sum(len(p) for p in parts),) + parts[0].shape[1:], parts[0].dtype)
+    at = 0
+    while parts:
+        p = parts.pop(0)
+        out[at:at + len(p)] = p
+        at += len(p)
+    return out
+
+
+def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
+    """The cuts of every texel with geometry standing on its square; texels whose centre lies inside
+    a solid have their `position` moved out, in place (module docstring). Works BLOCK (CHUNK while
+    probing) texels at a time so that its float64 temporaries stay a few megabytes: it keeps about 6
+    bytes a texel, plus 100 a cut texel."""
+    n = len(texels)
+    cuts = Cuts.none(n)
+    if n == 0:
+        return cuts
+    tris = _Triangles(scene)
+    todo = _candidates(texels, scene, tris)
+    if todo.size:
+        _probe_all(texels, scene, caster, todo, cuts, threads)
+    del todo
+    # After the moves: a moved texel's point is tested where it now lies.
+    for a in range(0, n, BLOCK):
+        sl = slice(a, min(a + BLOCK, n))
+        g = geometric_normals(scene, texels.triangle[sl], texels.normal[sl])
+        cuts.covered[sl] = tris.covered(texels.position[sl], g, texels.triangle[sl])
     return cuts
 
 
