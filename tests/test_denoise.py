@@ -266,3 +266,28 @@ def test_big_lightmaps_denoise_soft_and_indirect_light_in_one_run(monkeypatch):
         assert len(runs) == (2 if one_pass > 32 * 32 else 1), runs
     a, b = means.values()
     assert abs(a / b - 1) < 0.003
+
+
+@pytest.mark.parametrize("flt", ["RTLightmap", "RT"])
+def test_tiles_give_the_whole_image(monkeypatch, flt):
+    """A lightmap wider than denoise.TILE is denoised in overlapping tiles at the whole image's
+    exposure, over its own scratch image: as close to the truth as OIDN on the whole image (0.42 %
+    against 0.41 % here), 0.2 % of the mean apart RMS (OIDN's output moves that much with the
+    tiling, as with its own), and the caller's image, given as its own, is reused."""
+    rng = np.random.default_rng(7)
+    truth = _point_light(640)[:600]
+    mask = np.ones(truth.shape[:2], bool)
+    mask[:, 300:306] = False  # a gutter between two charts, across a tile's core
+    raw = _noisy(truth, mask, rng)
+    kwargs = {"filter": flt, "margin": 0} if flt == "RTLightmap" else {"filter": flt, "albedo": np.ones_like(raw)}
+    assert len(denoise._spans(600)) == 3 and len(denoise._spans(640)) == 3  # nine tiles
+    tiled = denoise.denoise_lightmap(raw, mask, **kwargs)
+    monkeypatch.setattr(denoise, "TILE", 4096)
+    whole = denoise.denoise_lightmap(raw, mask, **kwargs)
+    assert _rel_rmse(whole, truth, mask) < 0.5 * LEVEL  # it did denoise
+    assert _rel_rmse(tiled, truth, mask) < 1.1 * _rel_rmse(whole, truth, mask)
+    assert _rel_rmse(tiled, whole, mask) < 0.005
+    monkeypatch.setattr(denoise, "TILE", 512)
+    own = raw.copy()
+    out = denoise.denoise_lightmap(own, mask, own=True, **kwargs)
+    assert np.array_equal(out, tiled) and np.shares_memory(out, own)

@@ -33,8 +33,8 @@ MAX_TILT = 4.0
 
 
 @numba.njit(cache=True, parallel=True)
-def _landing_texels(pos, direction, tri, positions, normals, uvs, lm_of_tri, width, base, texel_of, inv_area,
-                    cut_of, cut_p, cut_n, cutout, opacity, opacity_tex, tex_uvs, pixels, info, texel, weight):
+def _landing_texels(pos, direction, tri, positions, normals, uvs, lm_of_tri, width, base, texel_of, area,
+                    cut_share, cut_of, cut_p, cut_n, cutout, opacity, opacity_tex, tex_uvs, pixels, info, texel, weight):
     """Per landing, its texel (−1: none of ours, or from behind) and the weight of its flux: one over
     the texel's area, the ratio of its cosines to the shading and the face normal, and on a cut-out
     surface one over its opacity α too. A photon lands there with
@@ -95,7 +95,12 @@ def _landing_texels(pos, direction, tri, positions, normals, uvs, lm_of_tri, wid
             continue
         if not on_side(cut_of, cut_p, cut_n, k, pos[h, 0], pos[h, 1], pos[h, 2]):
             continue
-        a = inv_area[k] * tilt
+        # One over the area of the texel's side of its cut (float64), found here rather than
+        # kept for every texel (8 bytes a texel at 2048²).
+        side = np.float64(area[k])
+        if cut_of[k] >= 0:
+            side *= cut_share[cut_of[k]]
+        a = (1.0 / max(side, 1e-30)) * tilt
         if cutout:
             alpha = opacity_at(opacity, opacity_tex, tex_uvs, pixels, info, t, b1, b2)
             if alpha <= 0.0:
@@ -145,7 +150,7 @@ def _adopt_or_add(own: np.ndarray, given: np.ndarray, fresh: bool) -> np.ndarray
 @register
 class TexelHistogram(Estimator):
     name = "texel_histogram"
-    # The sums (24), 1/area (8), the pixel table (4 a pixel), what the bake makes of the result:
+    # The sums (24), the pixel table (4 a pixel), what the bake makes of the result:
     # measured, benchmarks/memory.py
     bytes_per_texel = 80
     label = "Texel Histogram"
@@ -176,12 +181,10 @@ class TexelHistogram(Estimator):
         # The scene's own arrays, not copies (the bake's are float64 positions, float32 normals and UVs).
         # A texel cut by a wall (validity.py) counts the landings on its own side, over that side's area.
         cuts = texels.cuts if texels.cuts is not None else Cuts.none(len(texels))
-        area = texels.area.astype(np.float64)
-        cut = cuts.of >= 0
-        area[cut] *= cuts.share[cuts.of[cut]]
+        share = np.ascontiguousarray(cuts.share if len(cuts.share) else np.ones(1), np.float64)
         self._tables = (np.ascontiguousarray(sc.positions), np.ascontiguousarray(sc.normals),
                         np.ascontiguousarray(sc.uvs), lm_of_tri, width, base, texel_of,
-                        1.0 / np.maximum(area, 1e-30), *cuts.kernel_arrays())
+                        np.ascontiguousarray(texels.area), share, *cuts.kernel_arrays())
         srf = surfaces(sc)
         self._surfaces = (srf.cutout, srf.opacity, srf.opacity_tex, srf.tex_uvs, srf.pixels, srf.info)
         self.acc = np.zeros((len(texels), 3))

@@ -18,11 +18,18 @@ MIN_GROUPS = 4  # groups needed before the estimate is trusted for stopping a ba
 
 
 @numba.njit(cache=True)
-def _add_wx2(lum, previous, w, sum_wx2):
-    """sum_wx2 += w·x·x with x = (lum − previous)/w, in numpy's order of operations."""
-    for i in range(lum.shape[0]):
-        x = (lum[i] - previous[i]) / w
+def _add_wx2(cumulative, previous, w, sum_wx2):
+    """Per texel, lum = the mean of `cumulative`'s channels (float64, summed in order as numpy's
+    mean over a row of three), sum_wx2 += w·x·x with x = (lum − previous)/w, and previous = lum:
+    in place, no array the size of the bake."""
+    for i in range(cumulative.shape[0]):
+        lum = np.float64(cumulative[i, 0])
+        for c in range(1, cumulative.shape[1]):
+            lum += np.float64(cumulative[i, c])
+        lum /= cumulative.shape[1]
+        x = (lum - previous[i]) / w
         sum_wx2[i] += w * x * x
+        previous[i] = lum
 
 
 class BatchNoise:
@@ -37,12 +44,10 @@ class BatchNoise:
     def update(self, cumulative: np.ndarray, share: float) -> None:
         """`cumulative`: the estimator's irradiance sums so far (N, 3); `share`: the share of the
         bake traced so far (schedule.share)."""
-        lum = np.asarray(cumulative, np.float64).mean(axis=1)
         w = share - self.weight
         if w <= 0.0:
             return
-        _add_wx2(lum, self.previous, float(w), self.sum_wx2)  # no (N,) temporaries: 27 MB each at 2048²
-        self.previous = lum
+        _add_wx2(np.ascontiguousarray(cumulative), self.previous, float(w), self.sum_wx2)
         self.weight = share
         self.groups += 1
 
