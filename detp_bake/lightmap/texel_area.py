@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..sampling import inline
-from .texels import pixel_steps, texel_centres
-from .validity import Cuts, on_side
+from .texels import pixel_steps
+from .validity import on_side
 
 TRIES = 8  # points tried per sample before the texel's own position is used
 SPAN = 0.5  # the square's width in texels: Cycles' bake jitter
@@ -72,13 +72,26 @@ def area_point(spread, i, j, samples, q0, q1, tri, cx, cy, sx, sy, cut_of, cut_p
     return pos[i, 0], pos[i, 1], pos[i, 2]
 
 
-def texel_squares(texels) -> tuple:
-    """(tri, cx, cy, sx, sy, cut_of, cut_p, cut_n) for area_point: each texel's triangle, its centre
-    in pixels, its lightmap's width and height, and its cut (24 bytes per texel, for the direct pass
-    only)."""
-    cx, cy, sx, sy = texel_centres(texels)
-    cuts = texels.cuts if texels.cuts is not None else Cuts.none(len(texels))
-    return (np.ascontiguousarray(texels.triangle, np.int32), cx, cy, sx, sy, *cuts.kernel_arrays())
+def texel_squares(texels, a: int = 0, b: int | None = None) -> tuple:
+    """(tri, cx, cy, sx, sy, cut_of, cut_p, cut_n) for area_point, for texels a … b−1 (all by
+    default; texel a is row 0): each texel's triangle, its centre in pixels, its lightmap's width
+    and height, and its cut. By range, so that the direct pass holds them for one chunk of texels
+    at a time instead of 24 bytes for every texel; the same float32 values as texel_centres."""
+    b = len(texels) if b is None else b
+    ends = np.array([lm.offset + lm.count for lm in texels.lightmaps], np.int64)
+    which = np.searchsorted(ends, np.arange(a, b), side="right")  # each texel's lightmap
+    sx = np.array([lm.width for lm in texels.lightmaps], np.float32)[which]
+    sy = np.array([lm.height for lm in texels.lightmaps], np.float32)[which]
+    width = np.maximum(sx.astype(np.int64), 1)
+    pixel = texels.pixel[a:b].astype(np.int64)
+    cx = (pixel % width).astype(np.float32) + np.float32(0.5)
+    cy = (pixel // width).astype(np.float32) + np.float32(0.5)
+    if texels.cuts is None:
+        of, cut_p, cut_n = np.full(b - a, -1, np.int32), np.zeros((1, 2, 3)), np.zeros((1, 2, 3))
+    else:
+        of, cut_p, cut_n = texels.cuts.kernel_arrays()
+        of = of[a:b]
+    return (np.ascontiguousarray(texels.triangle[a:b], np.int32), cx, cy, sx, sy, of, cut_p, cut_n)
 
 
 def spread_reach(texels, scene) -> np.ndarray:

@@ -171,11 +171,12 @@ def _clip_area(xs, ys, n, x0, y0, x1, y1):
 
 
 @numba.njit(cache=True)
-def _rasterise(uv, world_area, width, height, best_tri, best_d2, bary, cover, inside):
+def _rasterise(uv, world_area, width, height, best_tri, best_d2, cover, inside):
     """For each texel, the UV triangle nearest its centre within half a texel diagonal, the
     world area of surface inside the texel's square (`cover`), summed over triangles, and how many
     triangles hold its centre strictly inside (`inside`: 2 or more is an overlap). Returns the UV
-    area (in texels²) of all triangles, and of their parts inside 0..1."""
+    area (in texels²) of all triangles, and of their parts inside 0..1. The nearest point's
+    barycentrics are not kept (24 bytes a pixel): _surface finds them again, the same floats."""
     xs = np.empty(12)
     ys = np.empty(12)
     total = 0.0
@@ -220,18 +221,22 @@ def _rasterise(uv, world_area, width, height, best_tri, best_d2, bary, cover, in
                 if d2 < best_d2[k] - 1e-12:
                     best_d2[k] = d2
                     best_tri[k] = t
-                    bary[k, 0], bary[k, 1], bary[k, 2] = w0, w1, w2
     return total, within
 
 
 @numba.njit(cache=True, parallel=True)
-def _surface(pixel, best_tri, bary, positions, normals, first, position, normal):
+def _surface(pixel, local, tri, uv, width, height, positions, normals, position, normal):
     """Each covered texel's surface point and unit shading normal (the face normal where the
-    shading normals cancel out), written straight into the TexelSet's rows: no (N, 3, 3) gathers."""
+    shading normals cancel out), written straight into the TexelSet's rows: no (N, 3, 3) gathers.
+    The point is the one of its triangle (`local` into `uv`, as _rasterise numbered them; `tri` in
+    the scene) nearest its centre, found by the same arithmetic as _rasterise's."""
     for q in numba.prange(pixel.shape[0]):
         k = pixel[q]
-        t = best_tri[k] + first
-        w0, w1, w2 = bary[k, 0], bary[k, 1], bary[k, 2]
+        t = tri[q]
+        u = local[q]
+        w0, w1, w2 = _closest_on_triangle((k % width) + 0.5, (k // width) + 0.5,
+                                          uv[u, 0, 0] * width, uv[u, 0, 1] * height, uv[u, 1, 0] * width,
+                                          uv[u, 1, 1] * height, uv[u, 2, 0] * width, uv[u, 2, 1] * height)
         for c in range(3):
             position[q, c] = (w0 * np.float64(positions[t, 0, c]) + w1 * np.float64(positions[t, 1, c])
                               + w2 * np.float64(positions[t, 2, c]))
@@ -302,36 +307,18 @@ def rasterise(scene: Scene) -> TexelSet:
             raise BakeError(f"object '{obj.name}': lightmap resolution must be positive, got {res}")
         lm = Lightmap(name, index, res, res, offset, 0, 0.0, objects=tuple(members) if obj.image else ())
         sl = lightmap_triangles(scene, lm) if obj.image else obj.triangles
-        first = int(obj.first_triangle) if not obj.image else 0
-        best_tri = np.full(res * res, -1, np.int32)
-        best_d2 = np.full(res * res, np.inf)
-        bary = np.zeros((res * res, 3))
-        cover = np.zeros(res * res)
-        inside = np.zeros(res * res, np.int32)
-        total, within = _rasterise(np.ascontiguousarray(uv[sl]), world_area[sl], res, res, best_tri, best_d2,
-                                   bary, cover, inside)
-        pixel = np.flatnonzero(best_tri >= 0).astype(np.int32)
-        if pixel.size == 0:
-            raise BakeError(f"{'atlas' if obj.image else 'object'} '{name}': its lightmap UVs cover no texel at "
-                            f"{res}x{res} (are the UVs all zero or outside 0..1?)")
-        pos = np.empty((len(pixel), 3))
-        nrm = np.empty((len(pixel), 3))
-        # In an atlas the rasterised triangles are the members' (`sl`, an index array): back to the scene's.
-        local = best_tri[pixel]
-        tri = (local + np.int32(first)) if not obj.image else sl[local].astype(np.int32)
-        _surface(pixel, best_tri if not obj.image else _global(best_tri, sl), bary, scene.positions, scene.normals,
-                 first, pos, nrm)
-        del bary
-        texel_size = _texel_size(world_area, uv_area, sl, res)
-        held = int(np.count_nonzero(inside))
-        lm.overlap = float(np.count_nonzero(inside > 1)) / held if held else 0.0
-        lm.outside = max(0.0, 1.0 - within / total) if total > 0 else 0.0
+        first = sl if obj.image else int(obj.first_triangle)
+        pixel, tri, local, area, centre = _cover(lm, uv[sl], world_area[sl], res, first)
         lm.charts, lm.chart_width, lm.border = charts_mod.chart_stats(uv[sl], scene.positions[sl], res, pixel, local)
-        lm.count, lm.texel_size = len(pixel), texel_size
+        lm.count, lm.texel_size = len(pixel), _texel_size(world_area, uv_area, sl, res)
         if obj.image:
             lm.placement = _placement(scene, members, tri, pixel, res, world_area, uv_area)
+        # Positions and normals last, once the pixel grids are gone: the peak is what the TexelSet keeps.
+        pos = np.empty((len(pixel), 3))
+        nrm = np.empty((len(pixel), 3))
+        _surface(pixel, local, tri, np.ascontiguousarray(uv[sl]), res, res, scene.positions, scene.normals, pos, nrm)
         lightmaps.append(lm)
-        parts.append([pos, nrm, tri, pixel, cover[pixel].astype(np.float32), best_d2[pixel] <= 1e-9])
+        parts.append([pos, nrm, tri, pixel, area, centre])
         offset += len(pixel)
     if not parts:
         raise BakeError("no object to bake")
@@ -342,6 +329,34 @@ def rasterise(scene: Scene) -> TexelSet:
         for p in parts:
             p[f] = None
     return TexelSet(*cat, lightmaps=lightmaps)
+
+
+def _cover(lm: Lightmap, uv: np.ndarray, world_area: np.ndarray, res: int, first) -> tuple:
+    """Lightmap `lm`'s covered pixels, their triangles (in the scene, and as numbered in `uv`), the
+    world area on their squares (float32) and whether their centre lies on a triangle; sets its
+    overlap and outside shares. `first`: the scene's number of uv's first triangle, or an atlas's
+    triangle list. The (res², …) grids live only here (24 bytes a pixel)."""
+    best_tri = np.full(res * res, -1, np.int32)
+    best_d2 = np.full(res * res, np.inf)
+    cover = np.zeros(res * res)
+    inside = np.zeros(res * res, np.int32)
+    total, within = _rasterise(np.ascontiguousarray(uv), world_area, res, res, best_tri, best_d2, cover, inside)
+    pixel = np.flatnonzero(best_tri >= 0).astype(np.int32)
+    if pixel.size == 0:
+        raise BakeError(f"{'atlas' if lm.objects else 'object'} '{lm.name}': its lightmap UVs cover no texel at "
+                        f"{res}x{res} (are the UVs all zero or outside 0..1?)")
+    # In an atlas the rasterised triangles are the members' (an index array): back to the scene's.
+    local = best_tri[pixel]
+    del best_tri
+    tri = (local + np.int32(first)) if isinstance(first, int) else first[local].astype(np.int32)
+    area = cover[pixel].astype(np.float32)
+    del cover
+    centre = best_d2[pixel] <= 1e-9
+    del best_d2
+    held = int(np.count_nonzero(inside))
+    lm.overlap = float(np.count_nonzero(inside > 1)) / held if held else 0.0
+    lm.outside = max(0.0, 1.0 - within / total) if total > 0 else 0.0
+    return pixel, tri, local, area, centre
 
 
 def of_objects(texels: TexelSet, names, scene: Scene | None = None) -> np.ndarray:
@@ -365,14 +380,6 @@ def _placement(scene: Scene, members, tri, pixel, res, world_area, uv_area) -> d
         rect = [int(x.min()), int(y.min()), int(x.max()) + 1, int(y.max()) + 1] if mine.size else [0, 0, 0, 0]
         out[obj.name] = {"texels": int(mine.size), "rect": rect,
                          "texel_size": _texel_size(world_area, uv_area, obj.triangles, res)}
-    return out
-
-
-def _global(best_tri: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """An atlas's per-pixel nearest triangle, from its members' list to the scene's numbering."""
-    out = np.full_like(best_tri, -1)
-    hit = best_tri >= 0
-    out[hit] = triangles[best_tri[hit]]
     return out
 
 

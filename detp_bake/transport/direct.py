@@ -446,18 +446,33 @@ def transmittance(caster, srf, o: np.ndarray, d: np.ndarray, far: np.ndarray, ep
     return out
 
 
-def texel_ids(texels) -> np.ndarray:
-    """(N,) uint64: each texel's random stream, from its lightmap's name and its pixel."""
-    ids = np.empty(len(texels), np.uint64)
-    for lm in texels.lightmaps:
-        name = np.frombuffer(hashlib.blake2b(lm.name.encode(), digest_size=8).digest(), np.uint64)[0]
-        ids[lm.texels] = texels.pixel[lm.texels].astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15) + name
+def lightmap_keys(texels) -> np.ndarray:
+    """(lightmaps,) uint64: each lightmap's part of its texels' random streams, from its name."""
+    return np.array([np.frombuffer(hashlib.blake2b(lm.name.encode(), digest_size=8).digest(), np.uint64)[0]
+                     for lm in texels.lightmaps], np.uint64)
+
+
+def texel_ids(texels, a: int = 0, b: Optional[int] = None, keys: Optional[np.ndarray] = None) -> np.ndarray:
+    """(b − a,) uint64: texels a … b−1's random streams (all texels by default), from their
+    lightmap's name (`keys`: lightmap_keys, found once for a pass of many chunks) and their pixel.
+    By range, so the direct pass builds them a chunk at a time."""
+    b = len(texels) if b is None else b
+    keys = lightmap_keys(texels) if keys is None else keys
+    ids = np.empty(b - a, np.uint64)
+    ends = np.array([lm.offset + lm.count for lm in texels.lightmaps], np.int64)
+    for m in range(int(np.searchsorted(ends, a, side="right")), len(ends)):
+        lm = texels.lightmaps[m]
+        if lm.offset >= b:
+            break
+        lo, hi = max(a, lm.offset), min(b, lm.offset + lm.count)
+        ids[lo - a:hi - a] = texels.pixel[lo:hi].astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15) + keys[m]
     return ids
 
 
 class _DirectWork:
     """The shadow rays of one direct_irradiance call, chunk by chunk (`chunk`, from any thread):
-    what every chunk reads (texels, lights, the scene's arrays) is set up once here."""
+    what every chunk reads (lights, the scene's arrays) is set up once here, what the kernels read
+    per texel (random streams, geometric normals, squares) once per chunk (`inputs`)."""
 
     def __init__(self, scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel,
                  l1=None, sharp_l1=None, masked=None, mask=None, leave_out=True):
@@ -468,11 +483,16 @@ class _DirectWork:
         # is left out of `out` (and of `l1`, `sharp`), kept in otherwise.
         self.masked, self.mask, self.leave_out = masked or {}, mask, leave_out
         n = len(texels)
+        self.texels = texels
         self.pos = np.ascontiguousarray(texels.position, np.float64)
         self.nrm = np.ascontiguousarray(texels.normal, np.float64)
-        self.geo = geometric_normals(scene, texels.triangle, self.nrm)
-        self.ids = texel_ids(texels)
-        self.squares = texel_squares(texels)
+        self.keys = lightmap_keys(texels)
+        # The texels' triangles' unit face normals, unflipped (towards 0), and which triangles they are:
+        # geometric_normals' arithmetic on the same triangles, without its (N, 3) gather.
+        used = np.zeros(len(scene.positions), bool)
+        used[texels.triangle] = True
+        self.faces = np.flatnonzero(used).astype(np.int32)
+        self.face_normals = geometric_normals(scene, self.faces, np.zeros((len(self.faces), 3)))
         self.uvs = np.ascontiguousarray(scene.uvs, np.float32)
         self.positions = np.ascontiguousarray(scene.positions, np.float32)
         self.eps = scene.ray_offset()
@@ -489,10 +509,19 @@ class _DirectWork:
         self.done = 0
         self.lock = threading.Lock()
 
+    def inputs(self, a, b) -> tuple:
+        """Texels a … b−1 as the kernels read them, row 0 being texel a: (ids, pos, nrm, geo,
+        squares). Built chunk by chunk: for all texels at once they held 72 bytes a texel."""
+        nrm = self.nrm[a:b]
+        geo = self.face_normals[np.searchsorted(self.faces, self.texels.triangle[a:b])]
+        geo[np.einsum("ij,ij->i", geo, nrm) < 0.0] *= -1.0  # to the shading normal's side, as geometric_normals
+        return texel_ids(self.texels, a, b, self.keys), self.pos[a:b], nrm, geo, texel_squares(self.texels, a, b)
+
     def chunk(self, index) -> None:
         if self.cancel is not None and self.cancel():
             raise BakeCancelled()
         a, b = self.chunks[index]
+        at = self.inputs(a, b)
         lights, shared, sharp = self.lights, self.shared, self.sharp
         most = (b - a) * max(max(l.samples, l.extra) for l in lights) * (len(shared) if shared else 1)
         buffers = (np.empty((most, 3), np.float32), np.empty((most, 3), np.float32), np.empty(most, np.float32),
@@ -504,10 +533,10 @@ class _DirectWork:
         shares = None
         if shared:
             shares = np.empty((b - a, len(shared)), np.int64)
-            light_shares(self.kinds, self.params, self.samples, a, b, self.pos, self.nrm, shares)
+            light_shares(self.kinds, self.params, self.samples, 0, b - a, at[1], at[2], shares)
         for li, light in enumerate(lights):
             counts = shares[:, shared.index(li)].copy() if li in shared else _NONE
-            own, own_l1, free = self.light(index, buffers, li, light, counts)
+            own, own_l1, free = self.light(index, at, buffers, li, light, counts)
             if li in self.masked:
                 # Its shadow mask: the share of its unshadowed irradiance that arrives (1 where none would).
                 got, could = own.sum(axis=1), free.sum(axis=1)
@@ -534,7 +563,7 @@ class _DirectWork:
         if self.progress is not None:
             self.progress(fraction)
 
-    def light(self, index, buffers, li, light, counts):
+    def light(self, index, at, buffers, li, light, counts):
         """One light's irradiance (n, 3) at chunk `index`'s texels, its L1 (n, 9) when asked, and
         for a masked light its irradiance were nothing in the way (n, 3); top-ups included."""
         a, b = self.chunks[index]
@@ -542,13 +571,14 @@ class _DirectWork:
         parts = lambda: [np.zeros((b - a, 3)), np.zeros((b - a, 9)) if self.l1 is not None else None,
                          np.zeros((b - a, 3)) if li in self.masked else None]
         own = parts()
-        disagree = self.cast(index, buffers, light, key, 0, light.samples, _NONE, own[0], counts, own[1], own[2])
+        disagree = self.cast(index, at, buffers, light, key, 0, light.samples, _NONE, own[0], counts, own[1],
+                             own[2])
         if light.extra:
             # A shadow edge, a spot's rim or the light's horizon crosses the texel's middle.
             mixed = np.flatnonzero(disagree)
             if mixed.size:
                 more = parts()
-                self.cast(index, buffers, light, key, light.samples, light.extra, (mixed + a).astype(np.int64),
+                self.cast(index, at, buffers, light, key, light.samples, light.extra, mixed.astype(np.int64),
                           more[0], None, more[1], more[2])
                 n0, n1 = light.samples, light.extra
                 for mine, extra in zip(own, more):
@@ -556,39 +586,42 @@ class _DirectWork:
                         mine[mixed] = (n0 * mine[mixed] + n1 * extra[mixed]) / (n0 + n1)
         return own
 
-    def cast(self, index, buffers, light, key, j0, count, sel, into, counts=None, into_l1=None, into_free=None):
-        """Rays of `light` (samples j0 … j0 + count − 1) for chunk `index` into `into` (and their
-        directions into `into_l1`, what they would bring unshadowed into `into_free`, when given);
-        for a light with a top-up, which texels of the chunk its rays disagree on, else None."""
+    def cast(self, index, at, buffers, light, key, j0, count, sel, into, counts=None, into_l1=None, into_free=None):
+        """Rays of `light` (samples j0 … j0 + count − 1) for chunk `index` (its texels `at`, from
+        `inputs`; `sel` counts from the chunk's first) into `into` (and their directions into
+        `into_l1`, what they would bring unshadowed into `into_free`, when given); for a light with
+        a top-up, which texels of the chunk its rays disagree on, else None."""
         a, b = self.chunks[index]
+        n = b - a
+        ids, pos, nrm, geo, squares = at
         o, d, t, w, owner = buffers
         counts = _NONE if counts is None else counts
         mesh = light.kind == MESH
         if light.kind == WORLD_MAP:
-            k = environment_rays(*light.env, light.samples, key, self.ids, a, b, self.pos, self.nrm, self.geo, self.eps,
-                                 self.spread, *self.squares, self.uvs, self.positions, o, d, t, w, owner)
+            k = environment_rays(*light.env, light.samples, key, ids, 0, n, pos, nrm, geo, self.eps,
+                                 self.spread, *squares, self.uvs, self.positions, o, d, t, w, owner)
         else:
             k = _shadow_rays(light.kind, light.params, j0, count, light.samples + light.extra, sel, counts, key,
-                             self.ids, a, b, self.pos, self.nrm, self.geo, self.eps,
+                             ids, 0, n, pos, nrm, geo, self.eps,
                              light.tri_cdf if mesh else _EMPTY_CDF, light.tri_pos if mesh else _EMPTY_TRI,
                              light.tri_normal if mesh else _EMPTY_VEC, light.tri_radiance if mesh else _EMPTY_VEC,
-                             self.spread, *self.squares, self.uvs, self.positions, o, d, t, w, owner)
+                             self.spread, *squares, self.uvs, self.positions, o, d, t, w, owner)
         if k == 0:
-            return np.zeros(b - a, bool) if light.extra else None
+            return np.zeros(n, bool) if light.extra else None
         if self.srf.cutout:
             passed = transmittance(self.caster, self.srf, o[:k], d[:k], t[:k], self.eps)
-            _gather_weighted(k, passed, w, owner, a, into)
+            _gather_weighted(k, passed, w, owner, 0, into)
             arrived = passed
         else:
             occluded = self.caster.occluded(o[:k], d[:k], t[:k])
-            _gather(k, occluded, w, owner, a, into)
+            _gather(k, occluded, w, owner, 0, into)
             arrived = occluded < 0
         if into_l1 is not None:
-            _gather_l1(k, np.asarray(arrived, np.float64), w, d, owner, a, into_l1)
+            _gather_l1(k, np.asarray(arrived, np.float64), w, d, owner, 0, into_l1)
         if into_free is not None:
-            _gather_weighted(k, np.ones(k), w, owner, a, into_free)
+            _gather_weighted(k, np.ones(k), w, owner, 0, into_free)
         self.rays[index] += k
-        return _disagree(w[:k].sum(axis=1) * arrived, owner[:k] - a, b - a, count) if light.extra else None
+        return _disagree(w[:k].sum(axis=1) * arrived, owner[:k], n, count) if light.extra else None
 
 
 _NONE = np.zeros(0, np.int64)  # no texels selected, no per-texel counts
