@@ -438,30 +438,53 @@ def _discs_meet(tri, tri_lo, tri_hi, order, node, left, first, count, origin, no
                     break
 
 
-def _triangle_tree(tri: np.ndarray) -> tuple:
-    """The radix tree over triangle boxes: (lo, hi, order, left, first, count, node)."""
-    lo, hi = tri.min(axis=1), tri.max(axis=1)
-    codes = morton_codes(0.5 * (lo + hi))
-    order = np.argsort(codes)
-    left, first, count, _, _ = _topology(codes[order], LEAF_SIZE, np.arange(len(tri) + 1))
-    node = np.zeros((len(left), 10), np.float32)
-    _box_leaves(lo, hi, order, left, first, count, node)
-    _box_inner(left, node)
-    return lo, hi, order, left, first, count, node
+class TriangleTree:
+    """A radix tree over the boxes of triangles (T, 3, 3), built once and asked many times: whether
+    triangles cross discs (`discs_meet`) or lie face to face against points (`faces_against`)."""
+
+    def __init__(self, positions: np.ndarray):
+        self.tri = tri = np.ascontiguousarray(positions, np.float64)
+        self.nodes = None
+        if len(tri):
+            lo, hi = tri.min(axis=1), tri.max(axis=1)
+            codes = morton_codes(0.5 * (lo + hi))
+            order = np.argsort(codes)
+            left, first, count, _, _ = _topology(codes[order], LEAF_SIZE, np.arange(len(tri) + 1))
+            node = np.zeros((len(left), 10), np.float32)
+            _box_leaves(lo, hi, order, left, first, count, node)
+            _box_inner(left, node)
+            self.nodes = (lo, hi, order, node, left, first, count)
+
+    def discs_meet(self, origin: np.ndarray, normal: np.ndarray, reach: np.ndarray) -> np.ndarray:
+        """Per disc (origin, unit normal, radius `reach`): whether some triangle may cross it.
+        Conservative: False only where no ray within the disc can hit a triangle."""
+        out = np.zeros(len(origin), np.bool_)
+        if self.nodes is not None and len(origin):
+            _discs_meet(self.tri, *self.nodes, np.ascontiguousarray(origin, np.float64),
+                        np.ascontiguousarray(normal, np.float64), np.ascontiguousarray(reach, np.float64), out)
+        return out
+
+    def faces_against(self, facing: np.ndarray, point: np.ndarray, normal: np.ndarray, own: np.ndarray,
+                      reach: np.ndarray) -> np.ndarray:
+        """Per point (on triangle `own`, unit `normal` its front): whether the front of another
+        triangle (unit `facing` normals, per triangle) lies face to face against it, crossing the
+        normal within `reach` in front of the point (or a float's width behind it): a box's bottom
+        face standing on a floor is covered so, and so is the floor under it, and the end faces of
+        two boxes put end to end."""
+        out = np.zeros(len(point), np.bool_)
+        if self.nodes is not None and len(point):
+            _against(self.tri, np.ascontiguousarray(facing, np.float64), *self.nodes,
+                     np.ascontiguousarray(point, np.float64), np.ascontiguousarray(normal, np.float64),
+                     np.ascontiguousarray(own, np.int64), np.ascontiguousarray(reach, np.float64), out)
+        return out
 
 
 def discs_meet_triangles(positions: np.ndarray, origin: np.ndarray, normal: np.ndarray,
                          reach: np.ndarray) -> np.ndarray:
-    """Per disc (origin, unit normal, radius `reach`): whether some triangle (T, 3, 3) may cross it.
-    Conservative: False only where no ray within the disc can hit a triangle."""
-    tri = np.ascontiguousarray(positions, np.float64)
-    out = np.zeros(len(origin), np.bool_)
-    if len(tri) == 0 or len(origin) == 0:
-        return out
-    lo, hi, order, left, first, count, node = _triangle_tree(tri)
-    _discs_meet(tri, lo, hi, order, node, left, first, count, np.ascontiguousarray(origin, np.float64),
-                np.ascontiguousarray(normal, np.float64), np.ascontiguousarray(reach, np.float64), out)
-    return out
+    """TriangleTree(positions).discs_meet, the tree built for this one call."""
+    if len(origin) == 0:
+        return np.zeros(0, np.bool_)
+    return TriangleTree(positions).discs_meet(origin, normal, reach)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -527,16 +550,7 @@ def _against(tri, facing, tri_lo, tri_hi, order, node, left, first, count, point
 
 def faces_against(positions: np.ndarray, facing: np.ndarray, point: np.ndarray, normal: np.ndarray,
                   own: np.ndarray, reach: np.ndarray) -> np.ndarray:
-    """Per point (on triangle `own`, unit `normal` its front): whether the front of another triangle
-    (unit `facing` normals, per triangle) lies face to face against it, crossing the normal within
-    `reach` in front of the point (or a float's width behind it): a box's bottom face standing on a
-    floor is covered so, and so is the floor under it, and the end faces of two boxes put end to end."""
-    tri = np.ascontiguousarray(positions, np.float64)
-    out = np.zeros(len(point), np.bool_)
-    if len(tri) == 0 or len(point) == 0:
-        return out
-    lo, hi, order, left, first, count, node = _triangle_tree(tri)
-    _against(tri, np.ascontiguousarray(facing, np.float64), lo, hi, order, node, left, first, count,
-             np.ascontiguousarray(point, np.float64), np.ascontiguousarray(normal, np.float64),
-             np.ascontiguousarray(own, np.int64), np.ascontiguousarray(reach, np.float64), out)
-    return out
+    """TriangleTree(positions).faces_against, the tree built for this one call."""
+    if len(point) == 0:
+        return np.zeros(0, np.bool_)
+    return TriangleTree(positions).faces_against(facing, point, normal, own, reach)

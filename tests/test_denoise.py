@@ -291,3 +291,17 @@ def test_tiles_give_the_whole_image(monkeypatch, flt):
     own = raw.copy()
     out = denoise.denoise_lightmap(own, mask, own=True, **kwargs)
     assert np.array_equal(out, tiled) and np.shares_memory(out, own)
+
+
+def test_masked_means_match_numpy():
+    """The compiled means keep_energy uses: numpy's weighted and plain means of the covered
+    texels, and the plain mean where the weights sum to nothing."""
+    rng = np.random.default_rng(3)
+    img = rng.random((40, 50, 3), dtype=np.float32)
+    mask = rng.random((40, 50)) < 0.6
+    w = rng.random((40, 50), dtype=np.float32)
+    np.testing.assert_allclose(denoise._masked_mean(img, mask, w, True),
+                               np.average(img[mask], axis=0, weights=w[mask].astype(np.float64)), rtol=1e-12)
+    np.testing.assert_allclose(denoise._masked_mean(img, mask, np.zeros_like(w), True), img[mask].mean(axis=0),
+                               rtol=1e-6)
+    np.testing.assert_allclose(denoise._masked_mean(img, mask, w, False), img[mask].mean(axis=0), rtol=1e-6)

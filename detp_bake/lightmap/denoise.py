@@ -42,6 +42,7 @@ from __future__ import annotations
 
 from typing import Optional
 
+import numba
 import numpy as np
 
 from scipy.ndimage import distance_transform_edt, find_objects
@@ -164,25 +165,7 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     Raises BakeError for a bad shape or filter, NaN/inf in covered texels, a missing pyoidn, or
     an OIDN failure.
     """
-    image = np.asarray(image, dtype=np.float32)
-    mask = np.asarray(mask, dtype=bool)
-    if image.ndim != 3 or image.shape[2] != 3:
-        raise BakeError(f"denoise: lightmap must be (H, W, 3), got {image.shape}")
-    if mask.shape != image.shape[:2]:
-        raise BakeError(f"denoise: mask has shape {mask.shape}, the lightmap {image.shape[:2]}")
-    for name, extra in (("weights", weights), ("regions", regions)):
-        if extra is not None and np.shape(extra) != mask.shape:
-            raise BakeError(f"denoise: {name} have shape {np.shape(extra)}, the lightmap {image.shape[:2]}")
-    albedo = _check_guide("albedo", albedo, image.shape)
-    normal = _check_guide("normal", normal, image.shape)
-    if filter is None:
-        filter = "RT" if albedo is not None or normal is not None else "RTLightmap"
-    if filter not in FILTERS:
-        raise BakeError(f"denoise: unknown filter {filter!r} (choose from {', '.join(FILTERS)})")
-    if filter == "RTLightmap" and (albedo is not None or normal is not None):
-        raise BakeError("denoise: the RTLightmap filter takes no albedo or normal guide; use RT")
-    if quality not in QUALITY:
-        raise BakeError(f"denoise: unknown quality {quality!r} (choose from {', '.join(QUALITY)})")
+    image, mask, albedo, normal, filter = _checked(image, mask, albedo, normal, filter, quality, weights, regions)
     runs_mask, smoothed = mask, None
     if fragments is not None and len(fragments):
         runs_mask = mask.copy()
@@ -208,6 +191,31 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     if smoothed is not None:
         result.reshape(-1, 3)[fragments.pixel] = smoothed
     return dilate(result, mask, margin, in_place=True)
+
+
+def _checked(image, mask, albedo, normal, filter, quality, weights, regions) -> tuple:
+    """denoise_lightmap's inputs as arrays of the right kinds, its filter chosen; a BakeError
+    for a bad shape, filter or quality."""
+    image = np.asarray(image, dtype=np.float32)
+    mask = np.asarray(mask, dtype=bool)
+    if image.ndim != 3 or image.shape[2] != 3:
+        raise BakeError(f"denoise: lightmap must be (H, W, 3), got {image.shape}")
+    if mask.shape != image.shape[:2]:
+        raise BakeError(f"denoise: mask has shape {mask.shape}, the lightmap {image.shape[:2]}")
+    for name, extra in (("weights", weights), ("regions", regions)):
+        if extra is not None and np.shape(extra) != mask.shape:
+            raise BakeError(f"denoise: {name} have shape {np.shape(extra)}, the lightmap {image.shape[:2]}")
+    albedo = _check_guide("albedo", albedo, image.shape)
+    normal = _check_guide("normal", normal, image.shape)
+    if filter is None:
+        filter = "RT" if albedo is not None or normal is not None else "RTLightmap"
+    if filter not in FILTERS:
+        raise BakeError(f"denoise: unknown filter {filter!r} (choose from {', '.join(FILTERS)})")
+    if filter == "RTLightmap" and (albedo is not None or normal is not None):
+        raise BakeError("denoise: the RTLightmap filter takes no albedo or normal guide; use RT")
+    if quality not in QUALITY:
+        raise BakeError(f"denoise: unknown quality {quality!r} (choose from {', '.join(QUALITY)})")
+    return image, mask, albedo, normal, filter
 
 
 def _touching(label: np.ndarray, count: int, reach: int) -> np.ndarray:
@@ -273,26 +281,62 @@ def _zero_gutter(name: str, a: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return a
 
 
-def _texel_weights(weights, mask) -> Optional[np.ndarray]:
-    """The covered texels' weights for a mean (float64), or None for a plain mean; made when
-    needed rather than kept through OIDN's run (8 bytes a texel)."""
-    w = None if weights is None else np.asarray(weights, np.float64)[mask]
-    return w if w is not None and w.sum() > 0 else None
+@numba.njit(cache=True)
+def _masked_mean(img, mask, weights, weighted):
+    """The mean of `img`'s texels under `mask` per channel, in float64, weighted by `weights`
+    when `weighted` and their sum is positive (else the plain mean): no copy of the texels, nor
+    of their products."""
+    h, w, channels = img.shape
+    total = np.zeros(channels)
+    plain = np.zeros(channels)
+    wsum = 0.0
+    count = 0
+    for y in range(h):
+        for x in range(w):
+            if mask[y, x]:
+                k = np.float64(weights[y, x]) if weighted else 1.0
+                wsum += k
+                count += 1
+                for c in range(channels):
+                    total[c] += k * np.float64(img[y, x, c])
+                    plain[c] += np.float64(img[y, x, c])
+    if weighted and wsum > 0.0:
+        return total / wsum
+    return plain / max(count, 1)
+
+
+@numba.njit(cache=True)
+def _rescale(img, mask, scale, apply):
+    """In place: texels outside `mask` 0, those under it clamped at 0 and, when `apply`, times
+    `scale` per channel (in float64, rounded once to float32). False if a texel is not finite."""
+    h, w, channels = img.shape
+    for y in range(h):
+        for x in range(w):
+            for c in range(channels):
+                if not mask[y, x]:
+                    img[y, x, c] = 0.0
+                    continue
+                v = img[y, x, c]
+                if not np.isfinite(v):
+                    return False
+                v = max(v, np.float32(0.0))
+                img[y, x, c] = np.float32(np.float64(v) * scale[c]) if apply else v
+    return True
 
 
 def _denoise_part(image, mask, albedo, normal, filter, keep_energy, quality, weights, own=False) -> np.ndarray:
     """The denoised values of the texels of `mask` ((K, 3) float32, in mask order), every other
     texel taken for gutter. `own` (denoise_lightmap): work in `image` and return the whole image,
-    the texels of `mask` denoised and 0 elsewhere."""
+    the texels of `mask` denoised and 0 elsewhere. Means are taken in compiled passes: at 2048²
+    a copy of the texels and their float64 products would be 60 bytes a texel more."""
     # Irradiance is never negative; OIDN's HDR mode assumes so. Buffers are reused in place
     # (the same numbers): at 2048² each (H, W, 3) copy is 50 MB.
     src = _zero_gutter("lightmap", image, mask) if own else _covered("lightmap", image, mask)
     np.maximum(src, 0.0, out=src)
-    covered = src[mask]
-    if not covered.any():  # all black stays black: OIDN returns up to 0.03 for an all-0 input
-        return src if own else np.zeros_like(covered)
-    raw_mean = np.average(covered, axis=0, weights=_texel_weights(weights, mask)) if keep_energy else None
-    del covered
+    if not src.any():  # all black stays black: OIDN returns up to 0.03 for an all-0 input
+        return src if own else np.zeros((int(mask.sum()), 3), np.float32)
+    area = np.zeros((1, 1), np.float32) if weights is None else np.asarray(weights, np.float32)
+    raw_mean = _masked_mean(src, mask, area, weights is not None) if keep_energy else None
 
     color = fill_gutter(src, mask, in_place=True)
     del src
@@ -310,19 +354,13 @@ def _denoise_part(image, mask, albedo, normal, filter, keep_energy, quality, wei
         raise BakeError(f"denoise: OIDN failed on a {image.shape[1]}x{image.shape[0]} lightmap "
                         f"({filter}): {exc}") from exc
     del color, kwargs, image
-    den = result[mask]
-    if not np.isfinite(den).all():
+    if not _rescale(result, mask, np.ones(3), False):  # clamped at 0, gutter 0
         raise BakeError(f"denoise: OIDN returned non-finite texels ({filter})")
-    np.maximum(den, 0.0, out=den)
     if keep_energy:
-        den_mean = np.average(den, axis=0, weights=_texel_weights(weights, mask))
+        den_mean = _masked_mean(result, mask, area, weights is not None)
         scale = np.where(den_mean > 0, raw_mean / np.where(den_mean > 0, den_mean, 1.0), 1.0)
-        np.multiply(den, scale, out=den, casting="unsafe")  # in float64, rounded once to float32
-    if not own:
-        return den
-    result[~mask] = 0.0
-    result[mask] = den
-    return result
+        _rescale(result, mask, scale, True)
+    return result if own else result[mask]
 
 
 _device = None

@@ -40,9 +40,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-# The tree and kernels behind bvh.discs_meet_triangles and faces_against: find_cuts builds the tree
-# once and tests its texels a block at a time.
-from ..bvh import _against, _discs_meet, _triangle_tree
+from ..bvh import TriangleTree
 from ..sampling import inline
 from .texels import TexelSet, geometric_normals, lightmap_triangles, neighbour_pairs, pixel_steps
 
@@ -272,14 +270,13 @@ def _shares(texels: TexelSet, scene, cuts: Cuts) -> np.ndarray:
     return np.clip(near / np.maximum(texels.area[owner].astype(np.float64), 1e-300), MIN_SHARE, 1.0)
 
 
-class _Triangles:
-    """The scene's triangle tree, built once for the whole of find_cuts: its disc and face-to-face
-    tests then run block by block (bvh's public calls rebuild the tree on every call, 0.5 s a
-    million triangles)."""
+class _Triangles(TriangleTree):
+    """The scene's triangle tree, built once for the whole of find_cuts (bvh's one-call functions
+    build it on every call, 0.5 s a million triangles), with the triangles' front faces and the
+    shadow rays' offset its face-to-face test needs."""
 
     def __init__(self, scene):
-        self.tri = np.ascontiguousarray(scene.positions, np.float64)
-        self.tree = _triangle_tree(self.tri) if len(self.tri) else None
+        super().__init__(scene.positions)
         p = self.tri
         facing = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
         facing /= np.maximum(np.linalg.norm(facing, axis=1, keepdims=True), 1e-300)
@@ -288,25 +285,10 @@ class _Triangles:
         self.facing = facing
         self.offset = scene.ray_offset()
 
-    def discs(self, origin, normal, reach) -> np.ndarray:
-        """bvh.discs_meet_triangles against the prebuilt tree."""
-        out = np.zeros(len(origin), np.bool_)
-        if self.tree is not None and len(origin):
-            lo, hi, order, left, first, count, node = self.tree
-            _discs_meet(self.tri, lo, hi, order, node, left, first, count, np.ascontiguousarray(origin, np.float64),
-                        np.ascontiguousarray(normal, np.float64), np.ascontiguousarray(reach, np.float64), out)
-        return out
-
     def covered(self, point, g, own) -> np.ndarray:
         """Per point (on triangle `own`, geometric normal `g`), whether the front of another face lies
-        against it, within twice the shadow rays' offset in front of it (direct.py): bvh.faces_against."""
-        out = np.zeros(len(point), np.bool_)
-        if self.tree is not None and len(point):
-            lo, hi, order, left, first, count, node = self.tree
-            _against(self.tri, self.facing, lo, hi, order, node, left, first, count,
-                     np.ascontiguousarray(point, np.float64), np.ascontiguousarray(g, np.float64),
-                     np.ascontiguousarray(own, np.int64), np.full(len(point), 2.0 * self.offset), out)
-        return out
+        against it, within twice the shadow rays' offset in front of it (direct.py)."""
+        return self.faces_against(self.facing, point, g, own, np.full(len(point), 2.0 * self.offset))
 
 
 def _subset(texels: TexelSet, rows) -> TexelSet:
@@ -342,7 +324,7 @@ def _candidates(texels: TexelSet, scene, tris: _Triangles) -> np.ndarray:
     for a in range(0, len(texels), BLOCK):
         sub = _subset(texels, slice(a, min(a + BLOCK, len(texels))))
         size, g = _frames(sub, scene)
-        near = tris.discs(sub.position + (LIFT * size)[:, None] * g, g, REACH * size)
+        near = tris.discs_meet(sub.position + (LIFT * size)[:, None] * g, g, REACH * size)
         todo[a:a + len(sub)] = near & (size > 0)
     return np.flatnonzero(todo).astype(np.int32)  # held while probing: half of int64's size
 
