@@ -12,11 +12,13 @@ It is imported only when a denoise is asked for, so a bake without denoising nev
 Each lightmap gets its own filter, released when done, and none of OIDN's scratch stays after the
 bake (pyoidn's one-call `denoise` keeps its filter and images until the next call). OIDN holds
 about 555 bytes a pixel of scratch untiled, and its own tiling (maxMemoryMB) never brings that
-under about 330 MB (measured at 768²-2048²: 420 MB at 2048²). So an image wider than TILE is
+under about 330 MB (measured at 768²-2048²: 370-420 MB at 2048²). So an image wider than TILE is
 denoised here in tiles of at most TILE², each with TILE_OVERLAP texels of context on every side
 (OIDN's own tile overlap: round_up(receptive field / 2, alignment) = 112), all at the exposure
-OIDN would find for the whole image (`_exposure`, equal to OIDN's own within 3e-6), and OIDN's
-scratch stays near 146 MB. The output moves with the tiling by about 0.2 % of the mean RMS
+OIDN would find for the whole image (`_exposure`, equal to OIDN's own within 3e-6). OIDN's
+scratch then stays near 68 MB (a 2048² image: 100 tiles of 429²; 146 MB with tiles of 480²,
+175 MB of 517², 158 MB of 565²: OIDN's own plan, not a smooth curve), at about 1.5 times the
+time of OIDN's own tiling at 256 MB (the overlaps: docs/real_levels.md). The output moves with the tiling by about 0.2 % of the mean RMS
 (OIDN's own tiling moves it as much), and it is as close to the truth as an untiled run: 0.42 %
 against 0.41 % on a 600×640 point-light field with 10 % noise (tests/test_denoise.py).
 
@@ -56,8 +58,8 @@ FILTERS = ("RT", "RTLightmap")
 # smooth continuation hardly changes the chart's texels; a ring costs ~10 ms at 512² here.
 FILL_RINGS = 16
 MIN_REGION = 64  # texels: a region walled off from its neighbours is denoised only from this size
-MAX_MEMORY_MB = 256  # OIDN's maxMemoryMB: more than a TILE² tile needs untiled (146 MB)
-TILE = 512  # the widest image OIDN gets at once (module docstring)
+MAX_MEMORY_MB = 256  # OIDN's maxMemoryMB: more than a TILE² tile needs untiled (111 MB)
+TILE = 448  # the widest image OIDN gets at once (module docstring)
 TILE_OVERLAP = 112  # context on each side of a tile: OIDN's own overlap, so tiles leave no seam
 LUMA = np.array([0.212671, 0.715160, 0.072169], np.float32)  # OIDN's luminance weights (autoexposure)
 QUALITY = {"high": 6, "balanced": 5, "fast": 4}  # OIDN_QUALITY_*

@@ -494,7 +494,7 @@ def _luminance(per_texel, scale, start, stop) -> np.ndarray:
 def _luminance_so_far(direct_at, noise, share, start, stop) -> np.ndarray:
     """The luminance of the bake so far at sites start:stop: the direct light and the indirect
     sums scaled to the whole bake (`share` of it traced), for the noise shown while tracing."""
-    lum = noise.previous[start:stop] / max(share, 1e-300)
+    lum = noise.previous[start:stop].astype(np.float64) / max(share, 1e-300)
     if direct_at is not None:
         lum += np.mean(direct_at[start:stop], axis=1, dtype=np.float64)
     return lum
