@@ -509,13 +509,16 @@ def _value(est, direct_e, share) -> np.ndarray:
     """E/π per texel (Cycles' Diffuse bake unit, DIRECT+INDIRECT, no COLOR): summed in float64,
     kept as float32 (the images' precision); the estimate's own array is let go."""
     irradiance, est.irradiance = est.irradiance, None
-    # stopped early (share < 1): the batches so far stand for the whole bake
-    total = irradiance / share if share < 1.0 else np.array(irradiance, np.float64)
-    irradiance = None
-    if direct_e is not None:
-        total += direct_e
-    total /= np.pi
-    return total.astype(np.float32)
+    value = np.empty(irradiance.shape, np.float32)
+    for a in range(0, len(irradiance), 1 << 18):  # a block at a time: no float64 copy of the whole bake
+        b = a + (1 << 18)
+        # stopped early (share < 1): the batches so far stand for the whole bake
+        total = irradiance[a:b] / share if share < 1.0 else np.array(irradiance[a:b], np.float64)
+        if direct_e is not None:
+            total += direct_e[a:b]
+        total /= np.pi
+        value[a:b] = total
+    return value
 
 
 def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_info=None,
