@@ -270,10 +270,10 @@ def test_big_lightmaps_denoise_soft_and_indirect_light_in_one_run(monkeypatch):
 
 @pytest.mark.parametrize("flt", ["RTLightmap", "RT"])
 def test_tiles_give_the_whole_image(monkeypatch, flt):
-    """A lightmap wider than denoise.TILE is denoised in overlapping tiles at the whole image's
-    exposure, over its own scratch image: as close to the truth as OIDN on the whole image (0.42 %
-    against 0.41 % here), 0.2 % of the mean apart RMS (OIDN's output moves that much with the
-    tiling, as with its own), and the caller's image, given as its own, is reused."""
+    """A lightmap wider than denoise.TILE is denoised in overlapping tiles on OIDN's 16-texel grid at
+    the whole image's exposure, over its own scratch image: the same result as OIDN on the whole
+    image (1e-5 of the mean apart here; tiles off the grid moved it by 0.2 % RMS), and the
+    caller's image, given as its own, is reused."""
     rng = np.random.default_rng(7)
     truth = _point_light(640)[:600]
     mask = np.ones(truth.shape[:2], bool)
@@ -285,9 +285,8 @@ def test_tiles_give_the_whole_image(monkeypatch, flt):
     monkeypatch.setattr(denoise, "TILE", 4096)
     whole = denoise.denoise_lightmap(raw, mask, **kwargs)
     assert _rel_rmse(whole, truth, mask) < 0.5 * LEVEL  # it did denoise
-    assert _rel_rmse(tiled, truth, mask) < 1.1 * _rel_rmse(whole, truth, mask)
-    assert _rel_rmse(tiled, whole, mask) < 0.005
-    monkeypatch.setattr(denoise, "TILE", 512)
+    assert np.abs(tiled - whole)[mask].max() <= 1e-4 * whole[mask].mean()  # the exposure: 3e-6 apart
+    monkeypatch.setattr(denoise, "TILE", 464)
     own = raw.copy()
     out = denoise.denoise_lightmap(own, mask, own=True, **kwargs)
     assert np.array_equal(out, tiled) and np.shares_memory(out, own)

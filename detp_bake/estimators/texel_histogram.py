@@ -150,9 +150,9 @@ def _adopt_or_add(own: np.ndarray, given: np.ndarray, fresh: bool) -> np.ndarray
 @register
 class TexelHistogram(Estimator):
     name = "texel_histogram"
-    # The sums (24), the pixel table (4 a pixel), what the bake makes of the result:
+    # The block sums and the bake's running sums (24 each), the noise sums (8), the pixel table (4 a pixel):
     # measured, benchmarks/memory.py
-    bytes_per_texel = 80
+    bytes_per_texel = 60
     label = "Texel Histogram"
     description = "Each photon's flux into the texel it lands in: no blur, white noise (for OIDN)"
     streaming = True

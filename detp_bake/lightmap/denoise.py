@@ -59,8 +59,9 @@ FILTERS = ("RT", "RTLightmap")
 FILL_RINGS = 16
 MIN_REGION = 64  # texels: a region walled off from its neighbours is denoised only from this size
 MAX_MEMORY_MB = 256  # OIDN's maxMemoryMB: more than a TILE² tile needs untiled (111 MB)
-TILE = 448  # the widest image OIDN gets at once (module docstring)
-TILE_OVERLAP = 112  # context on each side of a tile: OIDN's own overlap, so tiles leave no seam
+TILE = 464  # the widest image OIDN gets at once (module docstring)
+TILE_OVERLAP = 96  # context on each side of a tile, a multiple of TILE_ALIGN (module docstring)
+TILE_ALIGN = 16  # OIDN's network pools by 2 four times: tiles start on its 16-texel grid
 LUMA = np.array([0.212671, 0.715160, 0.072169], np.float32)  # OIDN's luminance weights (autoexposure)
 QUALITY = {"high": 6, "balanced": 5, "fast": 4}  # OIDN_QUALITY_*
 
@@ -148,9 +149,11 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     keep_energy: rescale each channel so the mean over covered texels equals the raw mean. OIDN
     moves that mean by up to ~0.6 % (measured at 40 % noise with guides; ~0.1 % at 10 %), while
     the raw mean is what the photons measured; one factor per channel leaves the shape as is.
-    weights: (H, W) surface area per texel, for that mean. A chart's border texels cover slivers of
-    surface, and OIDN evens them out with their neighbours: a plain mean over texels then counts a
-    small chart's (a leaf's) rim as much as its middle, and the rescale shifts its energy.
+    weights: (H, W) surface area per texel, for that mean (or a callable that makes it: with `own`
+    and one OIDN run, it is made before and after OIDN's run rather than kept through it). A
+    chart's border texels cover slivers of surface, and OIDN evens them out with their neighbours:
+    a plain mean over texels then counts a small chart's (a leaf's) rim as much as its middle, and
+    the rescale shifts its energy.
     margin: rings of `texels.dilate` that refill the gutter from the denoised texels afterwards
     (pass the bake's margin setting); texels further out are 0, as a bake leaves them.
     quality: OIDN's "high" (default), "balanced" or "fast".
@@ -167,6 +170,8 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     Raises BakeError for a bad shape or filter, NaN/inf in covered texels, a missing pyoidn, or
     an OIDN failure.
     """
+    made = weights if callable(weights) else None  # made when needed (the one-run path), else now
+    weights = None if made is not None and own else (made() if made is not None else weights)
     image, mask, albedo, normal, filter = _checked(image, mask, albedo, normal, filter, quality, weights, regions)
     runs_mask, smoothed = mask, None
     if fragments is not None and len(fragments):
@@ -178,9 +183,10 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
         del covered
     runs = region_runs(regions, runs_mask, apart)
     if own and len(runs) == 1 and runs[0][2]:  # one OIDN run over the whole image, in `image` itself
-        result = _denoise_part(image, runs[0][1], albedo, normal, filter, keep_energy, QUALITY[quality], weights,
-                               own=True)
+        result = _denoise_part(image, runs[0][1], albedo, normal, filter, keep_energy, QUALITY[quality],
+                               made or weights, own=True)
     else:
+        weights = made() if made is not None and weights is None else weights
         result = np.zeros_like(image)
         for box, part, network in runs:
             pick = lambda a: None if a is None else a[box]  # noqa: E731
@@ -337,8 +343,9 @@ def _denoise_part(image, mask, albedo, normal, filter, keep_energy, quality, wei
     np.maximum(src, 0.0, out=src)
     if not src.any():  # all black stays black: OIDN returns up to 0.03 for an all-0 input
         return src if own else np.zeros((int(mask.sum()), 3), np.float32)
-    area = np.zeros((1, 1), np.float32) if weights is None else np.asarray(weights, np.float32)
-    raw_mean = _masked_mean(src, mask, area, weights is not None) if keep_energy else None
+    area = lambda: np.zeros((1, 1), np.float32) if weights is None else np.asarray(  # noqa: E731
+        weights() if callable(weights) else weights, np.float32)
+    raw_mean = _masked_mean(src, mask, area(), weights is not None) if keep_energy else None
 
     color = fill_gutter(src, mask, in_place=True)
     del src
@@ -359,7 +366,7 @@ def _denoise_part(image, mask, albedo, normal, filter, keep_energy, quality, wei
     if not _rescale(result, mask, np.ones(3), False):  # clamped at 0, gutter 0
         raise BakeError(f"denoise: OIDN returned non-finite texels ({filter})")
     if keep_energy:
-        den_mean = _masked_mean(result, mask, area, weights is not None)
+        den_mean = _masked_mean(result, mask, area(), weights is not None)
         scale = np.where(den_mean > 0, raw_mean / np.where(den_mean > 0, den_mean, 1.0), 1.0)
         _rescale(result, mask, scale, True)
     return result if own else result[mask]
@@ -400,10 +407,10 @@ def _exposure(color: np.ndarray) -> float:
 
 
 def _spans(n: int) -> list:
-    """[(start, stop)] cores of one axis, even in size, none wider than TILE less its overlaps."""
-    count = -(-n // (TILE - 2 * TILE_OVERLAP))
-    edges = np.arange(count + 1) * n // count
-    return list(zip(edges[:-1].tolist(), edges[1:].tolist()))
+    """[(start, stop)] cores of one axis, each TILE less its overlaps wide (the last one less),
+    starting on multiples of TILE_ALIGN: a tile's pooling grid is then the whole image's."""
+    core = (TILE - 2 * TILE_OVERLAP) // TILE_ALIGN * TILE_ALIGN
+    return [(a, min(a + core, n)) for a in range(0, n, core)]
 
 
 def _run_filter(color: np.ndarray, filter: str, quality: int, hdr: bool = False, clean_aux: bool = False,

@@ -570,10 +570,13 @@ def _denoised(settings, texels, lm, value, direct, sharp, regions, fragments_of,
     Each part is made per texel and scattered into one image the denoiser may work in, and the
     sharp part's image only once the denoiser is done: at 2048² each image is 50 MB."""
     pixel = texels.pixel[lm.texels]
-    area, mask = texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)
+    mask = np.zeros(lm.height * lm.width, bool)
+    mask[pixel] = True
+    mask = mask.reshape(lm.height, lm.width)
+    area = lambda: texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)[0][..., 0]  # noqa: E731
     frag = fragments_of(lm) if fragments_of is not None else None
     counters["fragment_texels"] = counters.get("fragment_texels", 0) + (len(frag) if frag else 0)
-    denoised = partial(denoise_mod.denoise_lightmap, mask=mask, margin=settings.margin, weights=area[..., 0],
+    denoised = partial(denoise_mod.denoise_lightmap, mask=mask, margin=settings.margin, weights=area,
                        regions=regions, fragments=frag, apart=denoise_mod.FILL_RINGS if len(lm.members) > 1 else 1,
                        own=True)
     image = lambda values: texels_mod.to_image(values, lm, pixel)[0]  # noqa: E731

@@ -35,15 +35,19 @@ BATCH_SETS = 3  # record sets alive at once (photons._ArrayPool.KEEP)
 # Since texel validity (validity.py): its cut index and moved and covered flags (6), the sharp
 # lights' part of the direct light (12) and the region labels (4).
 TEXEL_BYTES = 61 + 2 * 12 + 6 + 12 + 4
-PIXEL_BYTES = 3 * 12 + 2  # raw, denoised and dilated float32 RGB, two masks
-# Denoising, one lightmap at a time: OIDN's scratch, bounded by denoise.MAX_MEMORY_MB (about 560
-# bytes a pixel below that), and the float32 images the denoiser works on beside it.
+# The dilated lightmap image (float32 RGB), its area weights for the denoiser's means and two masks;
+# the image before denoising is made only when asked (results.RawImages).
+PIXEL_BYTES = 12 + 4 + 2
+# Denoising, one lightmap at a time: OIDN's scratch, about 560 bytes a pixel of an image it gets
+# whole, and it gets at most denoise.TILE² at once (111 MB at 448²; at 2048² its tiles of 429²
+# took 68 MB), and the float32 images the denoiser works on beside it: the part being denoised
+# (OIDN writes over it), the part denoised before it, the sharp lights' part added after.
 OIDN_BYTES_PER_PIXEL = 560
-OIDN_MOST = 350_000_000
-# Measured 429 bytes a texel at 2048² (benchmarks/memory.py, texel histogram, OIDN's peak): the
-# bake's value, raw, direct, indirect, sharp and result images, and the denoiser's source, filled
-# colour, output and result, 14 float32 RGB images in all, plus labels and masks.
-DENOISE_PIXEL_BYTES = 14 * 12 + 12
+OIDN_MOST = 115_000_000
+# Measured (benchmarks/memory.py, 2048², 5 % gutter, 2 cores, docs/real_levels.md): the texel
+# histogram at 1M photons peaks at 147 bytes a texel while OIDN runs, 348 before the tiles and the
+# cuts that came with them; the estimate (each part at its own peak, summed) says 201.
+DENOISE_PIXEL_BYTES = 3 * 12 + 6
 # --directional (lightmap/sh.py): nine more channels a texel: the estimator's float64 sums and the
 # copy a take hands over (2 × 72), the shadow rays' L1 and its sharp part (2 × 36, float32), the
 # per-texel value (36), and per pixel the raw, denoised and written images (3 × 36).
