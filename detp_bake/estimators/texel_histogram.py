@@ -157,6 +157,7 @@ class TexelHistogram(Estimator):
     description = "Each photon's flux into the texel it lands in: no blur, white noise (for OIDN)"
     streaming = True
     every_texel = True  # its estimate costs nothing per texel: no sites between which to blend
+    texel_geometry_while_tracing = False  # landings find their texel from the scene's triangles
     for_denoiser = True
     directional = True
 

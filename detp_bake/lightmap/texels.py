@@ -10,6 +10,7 @@ bottom row, as in Blender's `Image.pixels`. Files are written top row first (see
 """
 from __future__ import annotations
 
+import contextlib
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
@@ -252,6 +253,37 @@ def _surface(pixel, local, tri, uv, width, height, positions, normals, position,
             nx, ny, nz = np.float64(ay * bz - az * by), np.float64(az * bx - ax * bz), np.float64(ax * by - ay * bx)
         length = max(np.sqrt(nx * nx + ny * ny + nz * nz), 1e-30)
         normal[q, 0], normal[q, 1], normal[q, 2] = nx / length, ny / length, nz / length
+
+
+def surface_points(texels: TexelSet, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Every texel's position and normal found again from its pixel and triangle, as `rasterise`
+    found them (the same kernel on the same float64 values: equal bit for bit), before texel
+    validity moved any."""
+    position = np.empty((len(texels), 3))
+    normal = np.empty((len(texels), 3))
+    uv = scene.uvs.astype(np.float64)
+    for lm in texels.lightmaps:
+        sl = lm.texels
+        tri = np.ascontiguousarray(texels.triangle[sl])
+        _surface(np.ascontiguousarray(texels.pixel[sl]), tri, tri, uv, lm.width, lm.height, scene.positions,
+                 scene.normals, position[sl], normal[sl])
+    return position, normal
+
+
+@contextlib.contextmanager
+def geometry_set_aside(texels: TexelSet, scene: Scene):
+    """While the block runs, `texels` has no positions or normals (None): 48 bytes a texel the
+    work in between does not read (tracing into the texel histogram, OIDN's run). They come back
+    equal bit for bit: found again (`surface_points`), with the positions texel validity moved
+    kept aside. `scene` must be the one the texels were rasterised from."""
+    moved = np.flatnonzero(texels.cuts.moved) if texels.cuts is not None else np.zeros(0, np.int64)
+    kept = texels.position[moved]
+    texels.position = texels.normal = None
+    try:
+        yield texels
+    finally:
+        texels.position, texels.normal = surface_points(texels, scene)
+        texels.position[moved] = kept
 
 
 def _areas(scene: Scene) -> tuple[np.ndarray, np.ndarray]:

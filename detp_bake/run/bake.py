@@ -47,6 +47,9 @@ RAYS_PER_SECOND = 2.0e6  # photon segments traced a second and thread, for the t
 # photons (docs/real_levels.md). At 64² on the project's scenes together was 0.2-0.5 points of RMSE
 # worse on the L-room and the Cornell box, 0.2-0.7 better on the window room and the courtyard.
 ONE_PASS_FROM = 1024 * 1024
+# From this many pixels the texels' positions and normals are set aside while a lightmap is
+# denoised, found again after (about 0.1 s a million texels on 2 cores): 48 bytes a texel.
+ASIDE_FROM = 1024 * 1024
 
 
 def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[Progress], None]] = None,
@@ -298,7 +301,7 @@ class _Pipeline:
                 message += f" · noise {100 * max(self.current.values(), default=0.0):.2g} %"
             self.report(Progress("trace", photons / total, message))
 
-        with contextlib.closing(iter(self._partials(trace_progress))) as partials:
+        with contextlib.closing(iter(self._partials(trace_progress))) as partials, self._aside_while_tracing():
             for part in partials:
                 totals.add(part)
                 share = tracer.schedule.share(totals.batches)
@@ -317,6 +320,14 @@ class _Pipeline:
         for name, est in self.runs.items():
             est.absorb(totals.sums.pop(name))  # the sums are the estimator's now: one copy, not two
             self.spent[name] += totals.seconds[name]
+
+    def _aside_while_tracing(self):
+        """The texels' positions and normals set aside while tracing when no estimator reads them
+        then and the tracing is this process's own (48 bytes a texel: texels.geometry_set_aside)."""
+        if self.cluster is None and self.frame_state is None and not any(
+                estimators.get(name).texel_geometry_while_tracing for name in self.names):
+            return texels_mod.geometry_set_aside(self.texels, self.scene)
+        return contextlib.nullcontext()
 
     def _show(self, totals, share) -> None:
         """The live preview of the primary estimator's lightmaps so far, when one is asked."""
@@ -400,8 +411,9 @@ class _Pipeline:
         denoised_apart = apart[0] is not None
         if name == self.names[-1] and l1 is None:
             self.direct_e = None
+        aside = partial(texels_mod.geometry_set_aside, self.texels, self.scene)
         result = _finish(replace(settings, estimator=name), self.bounces, self.texels, value, out.counters,
-                         self.tracer, seconds, self.direct_info, apart, self.regions, sharp, self.fragments_of)
+                         self.tracer, seconds, self.direct_info, apart, self.regions, sharp, self.fragments_of, aside)
         result.direct["denoised_apart"] = denoised_apart and bool(result.raw_images)
         result.direct["sharp_kept"] = sharp is not None and bool(result.raw_images)
         apart = sharp = out = value = None
@@ -522,7 +534,7 @@ def _value(est, direct_e, share) -> np.ndarray:
 
 
 def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_info=None,
-            direct=None, regions=None, sharp=None, fragments_of=None) -> BakeResult:
+            direct=None, regions=None, sharp=None, fragments_of=None, aside=None) -> BakeResult:
     """The per-texel E/π `value` as dilated (and denoised) images. `direct`: [the direct irradiance E
     in `value`, or None], to be denoised on its own and the rest (the indirect estimate) on its own
     (the list is emptied once the last lightmap has taken its part: whoever passes the only other
@@ -530,7 +542,9 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
     the part of `direct` from point, spot and sun lights, kept as it is (their shadow rays are exact
     away from penumbrae; docs/real_levels.md). `regions`: {object name: texels that see each other
     (validity.regions)}, each denoised apart. `fragments_of(lm)`: lightmap `lm`'s texels of charts too
-    narrow for OIDN and their neighbours on the surface (fragments.find), smoothed instead."""
+    narrow for OIDN and their neighbours on the surface (fragments.find), smoothed instead.
+    `aside()`: a context in which the texels' positions and normals are set aside, for the denoise
+    of lightmaps of ASIDE_FROM pixels or more (texels.geometry_set_aside)."""
     result_images, masks, centre_masks = {}, {}, {}
     warnings = []
     denoise = settings.denoise and denoise_mod.available()
@@ -544,8 +558,10 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
     for lm in texels.lightmaps:
         pixel = texels.pixel[lm.texels]
         if denoise:
+            big = aside is not None and lm.width * lm.height >= ASIDE_FROM
             result_images[lm.name], mask = _denoised(settings, texels, lm, value, direct, sharp,
-                                                     (regions or {}).get(lm.name), fragments_of, counters)
+                                                     (regions or {}).get(lm.name), fragments_of, counters,
+                                                     aside if big else contextlib.nullcontext)
         else:
             img, mask = texels_mod.to_image(value[lm.texels], lm, pixel)
             result_images[lm.name] = texels_mod.dilate(img, mask, settings.margin, in_place=True)
@@ -563,19 +579,27 @@ def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_
                       warnings=warnings)
 
 
-def _denoised(settings, texels, lm, value, direct, sharp, regions, fragments_of, counters) -> tuple:
+def _denoised(settings, texels, lm, value, direct, sharp, regions, fragments_of, counters, aside) -> tuple:
     """Lightmap `lm` denoised (by region, its fragments smoothed) and its mask (`_finish`). With
-    `direct` ([array]; emptied after the last lightmap took its part), the indirect part and the soft emitters' direct part are denoised apart (together
-    from ONE_PASS_FROM pixels), and the `sharp` lights' part added as the shadow rays gave it.
-    Each part is made per texel and scattered into one image the denoiser may work in, and the
-    sharp part's image only once the denoiser is done: at 2048² each image is 50 MB."""
+    `direct` ([array]; emptied after the last lightmap took its part), the indirect part and the
+    soft emitters' direct part are denoised apart (together from ONE_PASS_FROM pixels), and the
+    `sharp` lights' part added as the shadow rays gave it. Each part is made per texel and
+    scattered into one image the denoiser may work in, and the sharp part's image only once the
+    denoiser is done: at 2048² each image is 50 MB. The fragments are found first, the last read
+    of the texels' geometry, which `aside()` may then set aside."""
     pixel = texels.pixel[lm.texels]
     mask = np.zeros(lm.height * lm.width, bool)
     mask[pixel] = True
     mask = mask.reshape(lm.height, lm.width)
-    area = lambda: texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)[0][..., 0]  # noqa: E731
     frag = fragments_of(lm) if fragments_of is not None else None
     counters["fragment_texels"] = counters.get("fragment_texels", 0) + (len(frag) if frag else 0)
+    with aside():
+        return _denoised_parts(settings, texels, lm, value, direct, sharp, regions, frag, mask, pixel)
+
+
+def _denoised_parts(settings, texels, lm, value, direct, sharp, regions, frag, mask, pixel) -> tuple:
+    """`_denoised`'s parts: made per texel, scattered, denoised and added."""
+    area = lambda: texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)[0][..., 0]  # noqa: E731
     denoised = partial(denoise_mod.denoise_lightmap, mask=mask, margin=settings.margin, weights=area,
                        regions=regions, fragments=frag, apart=denoise_mod.FILL_RINGS if len(lm.members) > 1 else 1,
                        own=True)
