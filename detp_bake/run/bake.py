@@ -301,7 +301,9 @@ class _Pipeline:
                 message += f" · noise {100 * max(self.current.values(), default=0.0):.2g} %"
             self.report(Progress("trace", photons / total, message))
 
-        with contextlib.closing(iter(self._partials(trace_progress))) as partials, self._aside_while_tracing():
+        self.aside = contextlib.ExitStack()  # closed by _geometry_back
+        self.aside.enter_context(self._aside_while_tracing())
+        with contextlib.closing(iter(self._partials(trace_progress))) as partials:
             for part in partials:
                 totals.add(part)
                 share = tracer.schedule.share(totals.batches)
@@ -357,15 +359,7 @@ class _Pipeline:
         """Each estimator's lightmaps, denoised by region and with the fragments smoothed."""
         settings, texels, scene = self.settings, self.texels, self.scene
         self.estimate_progress(0.0)
-        # Texels a wall separates are denoised apart (validity.regions), in lightmaps that have cuts;
-        # so are the objects of an atlas (validity.by_object).
-        t1 = time.perf_counter()
-        self.regions = {lm.name: validity.regions(texels, lm, texels.cuts, self.caster, scene)
-                        for lm in texels.lightmaps if settings.denoise and (texels.cuts.of[lm.texels] >= 0).any()}
-        for lm in texels.lightmaps:
-            if settings.denoise and len(lm.members) > 1:
-                self.regions[lm.name] = validity.by_object(texels, lm, scene, self.regions.get(lm.name))
-        self.validity_seconds += time.perf_counter() - t1
+        self.regions = None  # found once the texels' geometry is back (`_geometry_back`)
         # Texels of charts too narrow for OIDN take their neighbours' mean on the surface (fragments.py),
         # found lightmap by lightmap as each is denoised; a comparison's estimators share them (one
         # bake keeps none after its lightmap is done).
@@ -382,6 +376,23 @@ class _Pipeline:
         if self.offset.any():
             texels.position += self.offset  # back where the texels are, in world space
         return results
+
+    def _geometry_back(self) -> None:
+        """The texels' positions and normals back where tracing set them aside (they stay aside
+        until the first estimator's E/π is made: 48 bytes a texel less then), and the regions
+        the denoiser keeps apart found: texels a wall separates (validity.regions), in lightmaps
+        that have cuts, and the objects of an atlas (validity.by_object)."""
+        self.aside.close()
+        if self.regions is not None:
+            return
+        settings, texels, scene = self.settings, self.texels, self.scene
+        t1 = time.perf_counter()
+        self.regions = {lm.name: validity.regions(texels, lm, texels.cuts, self.caster, scene)
+                        for lm in texels.lightmaps if settings.denoise and (texels.cuts.of[lm.texels] >= 0).any()}
+        for lm in texels.lightmaps:
+            if settings.denoise and len(lm.members) > 1:
+                self.regions[lm.name] = validity.by_object(texels, lm, scene, self.regions.get(lm.name))
+        self.validity_seconds += time.perf_counter() - t1
 
     def _result(self, name) -> BakeResult:
         settings, share = self.settings, self.tracer.share
@@ -400,10 +411,11 @@ class _Pipeline:
         seconds = {"rasterise": self.rasterise_seconds, "validity": self.validity_seconds,
                    "direct": self.direct_info.get("seconds", 0.0), "clearance": self.clearance_seconds,
                    "build": self.build[name], "trace": self.tracer.stats.seconds, "estimate": self.spent[name]}
-        # The noise sums go before the images are made (two float64s a texel).
+        # The noise sums go before the images are made (two float32s a texel).
         noise = self.noise.pop(name, None)
         if noise is not None:
             noise = noise.relative(self.at.lightmaps, partial(_luminance, self.sites.of_sites(value), np.pi))
+        self._geometry_back()
         # An estimate with white noise is denoised apart from the direct light (denoise.py). The
         # last estimator of a plain bake takes the direct light over: nothing after it reads it.
         apart = [None if self.direct_e is None or not kind.for_denoiser else self.direct_e]
