@@ -138,15 +138,21 @@ def export(bpy, resolution):
                         log=lambda msg: None)
 
 
-def oidn_alone(size: int) -> float:
-    """Seconds of one OIDN run (RTLightmap, high) on a size² image, every texel covered."""
+def oidn_alone(size: int, tile: int = 0) -> float:
+    """Seconds of one denoise (RTLightmap, high) of a size² image, every texel covered: in the
+    bake's tiles (denoise.TILE), or with `tile` as the widest image OIDN gets at once (a size or
+    more: OIDN's run on the whole image, tiled by OIDN itself within its maxMemoryMB)."""
     rng = np.random.default_rng(0)
     img = (0.5 + 0.1 * rng.standard_normal((size, size, 3))).astype(np.float32)
     mask = np.ones((size, size), bool)
     denoise.denoise_lightmap(img[:64, :64], mask[:64, :64])  # OIDN's device and weights loaded
-    t0 = time.perf_counter()
-    denoise.denoise_lightmap(img, mask, margin=0)
-    return time.perf_counter() - t0
+    bake_tile, denoise.TILE = denoise.TILE, tile or denoise.TILE
+    try:
+        t0 = time.perf_counter()
+        denoise.denoise_lightmap(img, mask, margin=0)
+        return time.perf_counter() - t0
+    finally:
+        denoise.TILE = bake_tile
 
 
 def phases(bpy, size: int, log) -> dict:
@@ -157,10 +163,12 @@ def phases(bpy, size: int, log) -> dict:
     lm = r.texels.lightmaps[0]
     row = {"size": size, "texels": len(r.texels), "photons": r.stats.photons, "wall": wall,
            "seconds": {k: round(v, 3) for k, v in r.seconds.items()}, "oidn_alone": oidn_alone(size),
+           "oidn_whole": oidn_alone(size, tile=size),
            "peak_mb": r.memory["peak_mb"], "estimate_mb": r.memory["estimate_mb"],
            "charts": {"count": lm.charts, "median_width": lm.chart_width, "border": lm.border},
            "warned": any("charts" in w for w in r.warnings), "noise": r.noise}
-    log(f"{size}²: {wall:.1f} s, {row['seconds']}, OIDN alone {row['oidn_alone']:.2f} s")
+    log(f"{size}²: {wall:.1f} s, {row['seconds']}, OIDN alone {row['oidn_alone']:.2f} s "
+        f"({row['oidn_whole']:.2f} s untiled)")
     return row
 
 
@@ -217,13 +225,14 @@ def race(bpy, size: int, spps, reference_spp: int, log) -> dict:
 def markdown(data) -> str:
     out = [f"Level: one mesh of {data['faces']:,} faces, Smart UV Project, sun and sky; {data['cores']} cores.\n",
            "| size | texels | photons | rasterise | validity | direct | trace | estimate | denoise | OIDN alone | "
-           "total | peak MB |", "|" + "---|" * 12]
+           "OIDN alone, whole image | total | peak MB |", "|" + "---|" * 13]
     for r in data["phases"]:
         s = r["seconds"]
         out.append(f"| {r['size']}² | {r['texels']:,} | {r['photons'] / 1e6:.3g}M | {s.get('rasterise', 0):.1f} | "
                    f"{s.get('validity', 0):.1f} | "
                    f"{s.get('direct', 0):.1f} | {s.get('trace', 0):.1f} | {s.get('estimate', 0):.1f} | "
-                   f"{s.get('denoise', 0):.1f} | {r['oidn_alone']:.1f} | {r['wall']:.1f} | {r['peak_mb']:,.0f} |")
+                   f"{s.get('denoise', 0):.1f} | {r['oidn_alone']:.1f} | {r.get('oidn_whole', 0):.1f} | "
+                   f"{r['wall']:.1f} | {r['peak_mb']:,.0f} |")
     out.append("\n| size | charts | median width (texels) | border texels | warned |\n|---|---|---|---|---|")
     for r in data["phases"]:
         c = r["charts"]

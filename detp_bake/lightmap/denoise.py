@@ -13,14 +13,14 @@ Each lightmap gets its own filter, released when done, and none of OIDN's scratc
 bake (pyoidn's one-call `denoise` keeps its filter and images until the next call). OIDN holds
 about 555 bytes a pixel of scratch untiled, and its own tiling (maxMemoryMB) never brings that
 under about 330 MB (measured at 768²-2048²: 370-420 MB at 2048²). So an image wider than TILE is
-denoised here in tiles of at most TILE², each with TILE_OVERLAP texels of context on every side
-(OIDN's own tile overlap: round_up(receptive field / 2, alignment) = 112), all at the exposure
-OIDN would find for the whole image (`_exposure`, equal to OIDN's own within 3e-6). OIDN's
-scratch then stays near 68 MB (a 2048² image: 100 tiles of 429²; 146 MB with tiles of 480²,
-175 MB of 517², 158 MB of 565²: OIDN's own plan, not a smooth curve), at about 1.5 times the
-time of OIDN's own tiling at 256 MB (the overlaps: docs/real_levels.md). The output moves with the tiling by about 0.2 % of the mean RMS
-(OIDN's own tiling moves it as much), and it is as close to the truth as an untiled run: 0.42 %
-against 0.41 % on a 600×640 point-light field with 10 % noise (tests/test_denoise.py).
+denoised here in tiles of at most TILE², each with TILE_OVERLAP texels of context on every side,
+starting on multiples of TILE_ALIGN (the network pools by 2 four times: a tile off that grid sees
+other pooling cells than the whole image, and its output moved by 0.2 % of the mean RMS), all at
+the exposure OIDN would find for the whole image (`_exposure`, within 3e-6 of OIDN's own). The
+output is then OIDN's on the whole image (1e-5 of the mean apart, tests/test_denoise.py), and
+OIDN's scratch stays near 87 MB (2048²: 64 tiles of up to 464²; its plan is not a smooth curve:
+at 448² it held 129 MB, at 432² 120), at the cost of the overlaps: 2.7 times the image's pixels
+at 2048² (docs/real_levels.md).
 
 Measured here (smooth point-light field over three charts, relative RMSE against the field, mean
 of 3 seeds at 128², 1 seed at 512²): with white noise of 10 % / 20 %, RTLightmap gives

@@ -39,14 +39,15 @@ TEXEL_BYTES = 61 + 2 * 12 + 6 + 12 + 4
 # the image before denoising is made only when asked (results.RawImages).
 PIXEL_BYTES = 12 + 4 + 2
 # Denoising, one lightmap at a time: OIDN's scratch, about 560 bytes a pixel of an image it gets
-# whole, and it gets at most denoise.TILE² at once (111 MB at 448²; at 2048² its tiles of 429²
-# took 68 MB), and the float32 images the denoiser works on beside it: the part being denoised
+# whole, and it gets at most denoise.TILE² at once (at most 115 MB; at 2048² its tiles of up to
+# 464² took 87 MB), and the float32 images the denoiser works on beside it: the part being denoised
 # (OIDN writes over it), the part denoised before it, the sharp lights' part added after.
 OIDN_BYTES_PER_PIXEL = 560
 OIDN_MOST = 115_000_000
 # Measured (benchmarks/memory.py, 2048², 5 % gutter, 2 cores, docs/real_levels.md): the texel
-# histogram at 1M photons peaks at 147 bytes a texel while OIDN runs, 348 before the tiles and the
-# cuts that came with them; the estimate (each part at its own peak, summed) says 201.
+# histogram at 1M photons peaks at 122 bytes a texel (348 before the tiles and the cuts that came
+# with them; its positions and normals are set aside while it traces and while OIDN runs); the
+# estimate (each part at its own peak, summed) says 240.
 DENOISE_PIXEL_BYTES = 3 * 12 + 6
 # --directional (lightmap/sh.py): nine more channels a texel: the estimator's float64 sums and the
 # copy a take hands over (2 × 72), the shadow rays' L1 and its sharp part (2 × 36, float32), the
