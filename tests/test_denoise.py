@@ -268,8 +268,7 @@ def test_big_lightmaps_denoise_soft_and_indirect_light_in_one_run(monkeypatch):
     assert abs(a / b - 1) < 0.003
 
 
-@pytest.mark.parametrize("flt", ["RTLightmap", "RT"])
-def test_tiles_give_the_whole_image(monkeypatch, flt):
+def test_tiles_give_the_whole_image(monkeypatch):
     """A lightmap wider than denoise.TILE is denoised in overlapping tiles on OIDN's 16-texel grid at
     the whole image's exposure, over its own scratch image: the same result as OIDN on the whole
     image (1e-5 of the mean apart here; tiles off the grid moved it by 0.2 % RMS), and the
@@ -279,7 +278,7 @@ def test_tiles_give_the_whole_image(monkeypatch, flt):
     mask = np.ones(truth.shape[:2], bool)
     mask[:, 300:306] = False  # a gutter between two charts, across a tile's core
     raw = _noisy(truth, mask, rng)
-    kwargs = {"filter": flt, "margin": 0} if flt == "RTLightmap" else {"filter": flt, "albedo": np.ones_like(raw)}
+    kwargs = {"filter": "RTLightmap", "margin": 0}
     assert len(denoise._spans(600)) == 3 and len(denoise._spans(640)) == 3  # nine tiles
     tiled = denoise.denoise_lightmap(raw, mask, **kwargs)
     monkeypatch.setattr(denoise, "TILE", 4096)
