@@ -113,12 +113,7 @@ def fill_gutter(image: np.ndarray, mask: np.ndarray, rings: int = FILL_RINGS, in
 def _covered(name: str, a: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """A copy of `a` with its covered texels and 0 in the gutter: only covered texels are read, so
     whatever the gutter held (0, an earlier dilation, NaN) cannot leak into the fill."""
-    vals = a[mask]
-    if not np.isfinite(vals).all():
-        raise BakeError(f"denoise: the {name} holds NaN or infinite values in covered texels")
-    out = np.zeros_like(a)
-    out[mask] = vals
-    return out
+    return _zero_gutter(name, np.array(a), mask)
 
 
 def _check_guide(name: str, guide: Optional[np.ndarray], shape: tuple) -> Optional[np.ndarray]:
@@ -170,9 +165,8 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     Raises BakeError for a bad shape or filter, NaN/inf in covered texels, a missing pyoidn, or
     an OIDN failure.
     """
-    made = weights if callable(weights) else None  # made when needed (the one-run path), else now
-    weights = None if made is not None and own else (made() if made is not None else weights)
-    image, mask, albedo, normal, filter = _checked(image, mask, albedo, normal, filter, quality, weights, regions)
+    image, mask, albedo, normal, filter = _checked(image, mask, albedo, normal, filter, quality,
+                                                   None if callable(weights) else weights, regions)
     runs_mask, smoothed = mask, None
     if fragments is not None and len(fragments):
         runs_mask = mask.copy()
@@ -183,10 +177,10 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
         del covered
     runs = region_runs(regions, runs_mask, apart)
     if own and len(runs) == 1 and runs[0][2]:  # one OIDN run over the whole image, in `image` itself
-        result = _denoise_part(image, runs[0][1], albedo, normal, filter, keep_energy, QUALITY[quality],
-                               made or weights, own=True)
+        result = _denoise_part(image, runs[0][1], albedo, normal, filter, keep_energy, QUALITY[quality], weights,
+                               own=True)  # a callable `weights` is made there, twice, around OIDN's run
     else:
-        weights = made() if made is not None and weights is None else weights
+        weights = weights() if callable(weights) else weights
         result = np.zeros_like(image)
         for box, part, network in runs:
             pick = lambda a: None if a is None else a[box]  # noqa: E731
