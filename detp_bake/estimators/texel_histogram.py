@@ -25,7 +25,7 @@ import numpy as np
 from ..transport.textures import hit_uv, opacity_at, surfaces
 from ..lightmap.texels import lightmap_triangles
 from ..lightmap.validity import Cuts, on_side
-from . import Estimate, Estimator, register
+from .base import Estimate, Estimator, register
 
 # A landing's weight cos(shading normal) / cos(face normal) is capped: on a face tilted 30° from its
 # shading normal (a six-sided smooth cylinder) the cap binds only within 7° of grazing the face.
@@ -153,8 +153,6 @@ class TexelHistogram(Estimator):
     # The block sums and the bake's running sums (24 each), the noise sums (8), the pixel table (4 a pixel):
     # measured, benchmarks/memory.py
     bytes_per_texel = 60
-    label = "Texel Histogram"
-    description = "Each photon's flux into the texel it lands in: no blur, white noise (for OIDN)"
     streaming = True
     every_texel = True  # its estimate costs nothing per texel: no sites between which to blend
     texel_geometry_while_tracing = False  # landings find their texel from the scene's triangles
