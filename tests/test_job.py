@@ -37,7 +37,7 @@ def test_a_bake_tells_started_phases_progress_and_one_result(tmp_path):
     assert "Error" not in kinds and "Cancelled" not in kinds and "Preview" not in kinds
     phases = [e.phase for e in events if isinstance(e, job_mod.Phase)]
     assert phases == ["direct", "prepare", "trace", "estimate", "write"]
-    progress = [e for e in events if isinstance(e, job_mod.Progress)]
+    progress = [e for e in events if isinstance(e, job_mod.Status)]
     overall = [p.overall for p in progress]
     assert overall == sorted(overall) and overall[-1] == 1.0  # the bar only moves forward
     traced = [p for p in progress if p.phase == "trace"]

@@ -201,9 +201,9 @@ def _run_job(job: job_mod.Job, cancel=None, said=(), main: Optional[job_mod.Main
     def tell(event):  # on the worker thread: in order with what the worker itself prints
         if job.cancelling or (cancel is not None and cancel()):
             return
-        if isinstance(event, job_mod.Progress):
+        if isinstance(event, job_mod.Status):
             progress(event)
-        elif isinstance(event, job_mod.Warning) and event.message not in said:
+        elif isinstance(event, job_mod.Notice) and event.message not in said:
             _log(f"warning: {event.message}")
 
     job.listener = tell
