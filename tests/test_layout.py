@@ -118,3 +118,19 @@ def test_the_estimators_declared_in_options_are_the_registered_ones():
     assert estimators.names() == [name for name, _, _ in options.ESTIMATORS]
     assert [(n, estimators.get(n).label) for n in estimators.names()] == \
         [(name, label) for name, label, _ in options.ESTIMATORS]
+
+
+def test_the_readmes_memory_figures_are_the_estimates():
+    """README's per-texel bytes are the memory estimate's own constants (run/memory.py and each
+    estimator's bytes_per_texel), so the page cannot keep a figure the code has dropped."""
+    import re
+    from detp_bake import estimators
+    from detp_bake.run import memory
+    text = " ".join((CORE.parent / "README.md").read_text().split())
+    said = re.search(r"texels \(about (\d+) bytes each, plus the estimator's own: (.*?)\), lightmap images "
+                     r"\(about (\d+) bytes a pixel", text)
+    assert said, "README: the memory estimate's sentence is gone or reworded"
+    assert int(said.group(1)) == memory.TEXEL_BYTES and int(said.group(3)) == memory.PIXEL_BYTES
+    for figure, name in re.findall(r"about (\d+) for (?:the )?([\w ]+?)(?:,|$)", said.group(2)):
+        key = {"texel histogram": "texel_histogram", "photon map": "photon_map"}.get(name, name)
+        assert int(figure) == estimators.get(key).bytes_per_texel, (name, figure)
