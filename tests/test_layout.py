@@ -131,6 +131,8 @@ def test_the_readmes_memory_figures_are_the_estimates():
                      r"\(about (\d+) bytes a pixel", text)
     assert said, "README: the memory estimate's sentence is gone or reworded"
     assert int(said.group(1)) == memory.TEXEL_BYTES and int(said.group(3)) == memory.PIXEL_BYTES
-    for figure, name in re.findall(r"about (\d+) for (?:the )?([\w ]+?)(?:,|$)", said.group(2)):
+    found = re.findall(r"(\d+) for (?:the )?([\w ]+?)(?:,|$)", said.group(2))
+    assert len(found) == 4, found
+    for figure, name in found:
         key = {"texel histogram": "texel_histogram", "photon map": "photon_map"}.get(name, name)
         assert int(figure) == estimators.get(key).bytes_per_texel, (name, figure)
