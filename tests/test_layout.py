@@ -136,3 +136,12 @@ def test_the_readmes_memory_figures_are_the_estimates():
     for figure, name in found:
         key = {"texel histogram": "texel_histogram", "photon map": "photon_map"}.get(name, name)
         assert int(figure) == estimators.get(key).bytes_per_texel, (name, figure)
+
+
+def test_no_file_over_600_lines():
+    """One module per idea: a file past 600 lines holds more than one (the extension's own code)."""
+    root = CORE.parent
+    files = [p for folder in ("detp_bake", "operators", "ui") for p in (root / folder).rglob("*.py")]
+    long = {str(p.relative_to(root)): n for p in files + [root / "__init__.py"]
+            if (n := len(p.read_text().splitlines())) > 600}
+    assert not long, long

@@ -10,7 +10,7 @@ some πr² times as many segments and each must be found in an index. Its noise 
 1/√(photons landing on the texel), and independent from texel to texel. That white noise is what
 OIDN is trained to remove (docs/design.md, Denoising: noise correlated over a disc passes through it), so this
 estimator is meant to be denoised: it is the indirect part of a bake whose direct light comes from
-shadow rays, and the bake denoises the two parts apart (bake._finish), since OIDN smooths white
+shadow rays, and the bake denoises the two parts apart (finishing.Finishing), since OIDN smooths white
 noise over a smooth field far better than next to the sharp edges of direct light (L-shaped room,
 1M photons: 1.65 % against 2.24 % RMSE to Cycles). With `--direct photons` or without denoising it
 is the noisiest of the estimators.

@@ -541,7 +541,7 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     `select`: the lights with extent share `samples` rays each per texel, dealt out by what each
     would give the texel unshadowed (light_shares), instead of `samples` rays each. `sharp`, an
     (N, 3) float32 array when given, receives the part of point, spot and sun lights (SHARP_KINDS):
-    their rays all agree away from penumbrae, so that part needs no denoising (bake._finish). `l1`,
+    their rays all agree away from penumbrae, so that part needs no denoising (finishing.Finishing). `l1`,
     an (N, 9) float32 array when given, receives the directional lightmap's L1 of the same rays
     (lightmap/sh.py: each arriving ray's irradiance times its direction, axis-major), and `sharp_l1`
     (with `sharp` and `l1`) the sharp lights' part of it. `shadowmask`: names of lights whose
