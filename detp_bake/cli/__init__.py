@@ -144,7 +144,7 @@ def _open_scene(args, settings, bl_scene, warn=output.log):
     created = []
     scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
                                  created, max_bytes=geometry_budget(settings.memory_budget_mb) or None,
-                                 atlas=settings)
+                                 atlas=settings, warn=warn)
     _warn_created(args, created, warn)
     _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
          f"baking {sum(o.bake for o in scene.objects)} objects")
