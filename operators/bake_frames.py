@@ -82,7 +82,7 @@ class FramesBlenderJob(BakeJob):
             "estimator": self.settings.estimator, "photons": last["photons"], "segments": last["segments"],
             "objects": len(r.files[r.frames[-1]]), "seconds": last["seconds"], "noise": last["noise"],
             "stopped_by": last["stopped_by"], "frames": r.frames, "output_directory": self.out_dir,
-            "files": r.files[r.frames[-1]]})
+            "files": r.files[r.frames[-1]]}, allow_nan=False)
         for warning in self.warnings:
             report({"WARNING"}, warning)
         done = f"{len(r.frames)} of {len(self.frame_range.frames())} frames" if r.cancelled else f"{len(r.frames)} frames"

@@ -167,7 +167,7 @@ class BakeJob(BlenderJob):
             report({"WARNING"}, warning)
         if r is None:
             s.last_report = json.dumps({"estimator": self.settings.estimator, "objects": len(files), "files": files,
-                                        "reused": sorted(reused), "output_directory": self.out_dir})
+                                        "reused": sorted(reused), "output_directory": self.out_dir}, allow_nan=False)
             report({"INFO"}, f"All {len(files)} lightmaps unchanged since the last bake into {self.out_dir}: kept")
             return {"FINISHED"}
         summary = r.report()
@@ -176,7 +176,7 @@ class BakeJob(BlenderJob):
                                     "seconds": summary["seconds"], "files": files, "reused": sorted(reused),
                                     "noise": summary["noise"], "stopped_by": summary["stopped_by"],
                                     "charts": {o["name"]: o["charts"] for o in summary["objects"] if "charts" in o},
-                                    "output_directory": self.out_dir})
+                                    "output_directory": self.out_dir}, allow_nan=False)
         total = sum(v for k, v in r.seconds.items() if k != "rasterise")
         report({"INFO"}, f"Baked {len(r.files)} lightmaps with {r.settings.estimator} in {total:.1f} s "
                          f"({summary['photons']:,} photons) to {self.out_dir}{kept}")

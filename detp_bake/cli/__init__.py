@@ -20,6 +20,7 @@ from .. import __version__, options
 from ..run import bake as bake_mod, frames, interrupt, job as job_mod
 from ..run.distributed import Cluster
 from ..run.memory import geometry_budget
+from ..run.results import NOISE_UNIT
 from ..lightmap import images
 from . import output
 from ..errors import BakeCancelled, BakeError
@@ -256,10 +257,9 @@ def run_compare(args, bl_scene=None, cancel=None) -> dict:
 def _log_noise(result) -> None:
     if result.stopped_by != "photons":
         _log(f"stopped by {result.stopped_by.replace('_', ' ')} after {result.stats.photons:,} photons")
-    if result.noise:
-        worst = sorted(result.noise.items(), key=lambda kv: -kv[1])
-        _log("relative noise: " + ", ".join(f"{name} {100 * v:.2g} %" for name, v in worst[:8]) +
-             (f" (+{len(worst) - 8} more in report.json)" if len(worst) > 8 else ""))
+    line = output.noise_line(result.noise, result.noise_unmeasured, result.noise_unit != NOISE_UNIT)
+    if line:
+        _log(line)
 
 
 def run_bake(args, bl_scene=None, cancel=None) -> dict:
@@ -298,7 +298,7 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
             "estimator": settings.estimator, "photons": result.stats.photons if result is not None else 0,
             "stopped_by": result.stopped_by if result is not None else "reused",
             "reused": list(done.reused),
-            "noise": {n: round(100.0 * v, 3) for n, v in (result.noise.items() if result is not None else ())},
+            "noise": result.noise_percent() if result is not None else {},
             "warnings": list(result.warnings) if result is not None else list(warn)}
 
 

@@ -298,5 +298,5 @@ def _write_report(result: FramesResult, frames: FrameRange, settings: dict, eval
            "seconds": {"evaluate": evaluate_seconds, "total": total_seconds},
            "per_frame": result.sections}
     tmp = result.report_path.with_name(".report.partial.json")
-    tmp.write_text(json.dumps(doc, indent=2))
+    tmp.write_text(json.dumps(doc, indent=2, allow_nan=False))
     os.replace(tmp, result.report_path)

@@ -225,6 +225,6 @@ def write_all_reused(plan: Plan, out_dir) -> Path:
         doc["earlier_objects"] = plan.earlier
     target = Path(out_dir) / "report.json"
     tmp = target.with_name(".report.partial.json")
-    tmp.write_text(json.dumps(doc, indent=2))
+    tmp.write_text(json.dumps(doc, indent=2, allow_nan=False))
     os.replace(tmp, target)
     return target
