@@ -80,3 +80,78 @@ def test_faces_of_zero_area_neither_crash_nor_make_nans(tmp_path, capsys, bpy):
         assert np.isfinite(image).all() and image.max() > 0, name
     assert main([*common, "--objects", "Dot"]) == 2
     assert "error: object 'Dot' has no faces to bake: all its faces have zero area" in capsys.readouterr().err
+
+
+def _strict(text):
+    """JSON as the standard has it: NaN or Infinity is an error, not a number."""
+    def refuse(constant):
+        raise ValueError(f"{constant} in JSON")
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_noise_a_small_bake_cannot_measure_is_null_with_a_reason(tmp_path, capsys, bpy):
+    path = _ground_scene(bpy, tmp_path / "ground.blend")
+    out, _ = tmp_path / "out", capsys.readouterr()
+    assert main(["bake", str(path), "--photons", "20000", "--resolution", "16", "--out", str(out), "--json"]) == 0
+    captured = capsys.readouterr()
+    assert "nan" not in captured.err.lower()
+    assert ("detp_bake: noise not measured: the 20,000 photons were traced in one block, and the noise is read "
+            "from the spread between blocks: trace more photons to have it measured") in captured.err
+    report = _strict((out / "report.json").read_text())
+    assert report["noise"] == {"Ground": None} and "trace more photons" in report["noise_unmeasured"]
+    assert _strict(captured.out)["noise"] == {"Ground": None}
+
+
+def test_noise_is_relative_to_the_scenes_light_not_each_lightmaps_own():
+    """A dim lightmap and a bright one with the same spread between blocks read the same noise:
+    the RMS standard deviation over the mean irradiance of every texel."""
+    from types import SimpleNamespace
+    from detp_bake.lightmap.noise import BatchNoise
+    rng = np.random.default_rng(3)
+    level = np.r_[np.full(100, 0.01), np.full(100, 1.0)]  # a dim lamp shade, a lit floor
+    groups = level + rng.normal(0.0, 0.005, (4, 200))  # four blocks' estimates, a quarter of the bake each
+    noise = BatchNoise(200)
+    for g in range(4):
+        noise.update(np.repeat(0.25 * groups[:g + 1].sum(axis=0)[:, None], 3, axis=1), 0.25 * (g + 1))
+    lightmaps = [SimpleNamespace(name="Shade", offset=0, count=100), SimpleNamespace(name="Floor", offset=100, count=100)]
+    estimate = groups.mean(axis=0)
+    got = noise.relative(lightmaps, lambda a, b: estimate[a:b])
+    sd = np.sqrt(groups.var(axis=0, ddof=1) / 4)
+    for lm in lightmaps:
+        expected = np.sqrt(np.mean(sd[lm.offset:lm.offset + lm.count] ** 2)) / estimate.mean()
+        assert got[lm.name] == pytest.approx(expected, rel=2e-3), lm.name  # float32 sums
+    assert 0.5 < got["Shade"] / got["Floor"] < 2.0 and got["Shade"] < 0.01  # not 100 times the floor's
+    assert BatchNoise(200).relative(lightmaps, lambda a, b: estimate[a:b]) == {}  # no blocks: nothing, not NaN
+
+
+def test_per_cent_figures_are_plain_digits():
+    from detp_bake.cli.output import noise_line, percent
+    assert [percent(v) for v in (14.0, 2.5, 0.031, 0.0004)] == ["1400", "250", "3.1", "0.04"]
+    line = noise_line({"Ground": 0.012, "Cylinder": 0.031}, "")
+    assert line.startswith("noise: Cylinder 3.1 %, Ground 1.2 % of the scene's mean irradiance")
+    assert "--photons" in line and "--target-noise" in line
+
+
+def test_a_killed_bakes_temporaries_go_with_the_next_bake_and_no_others(tmp_path, capsys, bpy):
+    """Files named as the bake names its temporaries, of a process that is gone, are removed (said
+    as a warning); a live process's (a bake writing into the same folder now) and every other file
+    stay as they were."""
+    import subprocess
+    import sys
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead, live = int(gone.stdout), __import__("os").getpid()
+    path = _ground_scene(bpy, tmp_path / "ground.blend")
+    out = tmp_path / "out"
+    out.mkdir()
+    stale = [f".Ground.texel_histogram.{dead}.partial.exr", f".report.{dead}.partial.json", f".detp_bake_probe_{dead}"]
+    kept = [f".Crate.texel_histogram.{live}.partial.exr", "notes.txt", f"Ground.{dead}.partial.exr",
+            f".Ground.texel_histogram.{dead}.exr", f".mine.{dead}.partial.exr.bak"]
+    for name in stale + kept:
+        (out / name).write_bytes(b"half a file")
+    assert main(["bake", str(path), "--photons", "20000", "--resolution", "16", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert f"detp_bake: warning: removed 3 temporary files an interrupted bake left in {out}: " \
+           f"{', '.join(sorted(stale))}" in err
+    assert _files(out) == sorted(kept + ["Ground.texel_histogram.exr", "report.json"])
+    assert all((out / name).read_bytes() == b"half a file" for name in kept)
+    assert any("removed 3 temporary files" in w for w in json.loads((out / "report.json").read_text())["warnings"])
