@@ -14,6 +14,7 @@ from .evaluation import Collector, flatten, holdout, instancers, render_evaluati
 from .materials import Surface, read_surface
 from .world import export_world
 from .atlas import ATLAS_UV, pack as atlas_pack
+from .identity import fingerprints
 from .uv import ensure_lightmap_uv
 
 
@@ -164,5 +165,8 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
     scene = Scene(positions=pos, normals=nrm, uvs=uvs, albedo=alb, emission=emi, objects=objs,
                   lights=collector.lights, world=world, default_bounces=scene_bounces(bl_scene),
                   world_map=world_map, **surfaces)
+    baked = {o.name for o in objs if o.bake}
+    stats["geometry"] = fingerprints(o for o in targets if o.name in baked)  # for the glTF export (identity.py)
+    stats["file"] = bpy.data.filepath
     scene.export_stats = stats
     return scene

@@ -329,7 +329,7 @@ def run_export_gltf(args, bl_scene=None, cancel=None) -> dict:
     if not (Path(args.lightmaps) / "report.json").is_file():
         raise BakeError(f"no report.json in '{args.lightmaps}': give the output folder of a bake (--lightmaps)")
     try:
-        from ..blender import files as blend_files, gltf
+        from ..blender import files as blend_files, gltf, identity
     except ImportError as exc:
         if exc.name != "bpy":
             raise
@@ -337,6 +337,7 @@ def run_export_gltf(args, bl_scene=None, cancel=None) -> dict:
     gltf.lightmap_files(args.lightmaps, args.estimator)  # a bad report is named before the scene is opened
     if bl_scene is None:
         bl_scene = blend_files.open_blend(Path(args.scene))
+    identity.check_lightmaps(bl_scene, args.lightmaps)  # this file's lightmaps, of its geometry as it is
     _check_cancel(cancel)
     done = gltf.export_gltf(bl_scene, args.lightmaps, args.out, args.estimator, args.uv_layer, _log)
     return {"command": "export-gltf", **done}
