@@ -26,8 +26,13 @@ def cluster(context):
 
 
 def check_online(address: str) -> None:
-    """A scheduler elsewhere is the network (the manifest's `network` permission): only with
-    Blender's Allow Online Access on (BakeError saying where to turn it on otherwise)."""
+    """A scheduler on another machine is the network (the manifest's `network` permission): only
+    with Blender's Allow Online Access on (BakeError saying where to turn it on otherwise). One on
+    this machine (127.0.0.1, localhost, ::1) needs no network."""
+    from urllib.parse import urlsplit
+    host = urlsplit(address if "://" in address else f"//{address}").hostname or ""
+    if host.startswith("127.") or host in ("localhost", "::1"):
+        return
     if not getattr(bpy.app, "online_access", True):
         from ..detp_bake.errors import BakeError
         raise BakeError(f"the Dask scheduler {address} of the preferences needs Allow Online Access "
