@@ -149,8 +149,8 @@ OPTIONS = (
            f"light every this many texels and blend between them (0: automatic, {AUTO_SPACING} on lightmaps "
            f"of {AUTO_FROM}² and more; 1: every texel)", minimum=1, maximum=MAX_SPACING, auto=0,
            metavar="TEXELS"),
-    Option("target_noise", float, 0.0, "Noise Target", "Stop tracing once every lightmap's relative noise is at most "
-           "this many per cent (0: off); Photons is then the most to trace", minimum=0.0, maximum=100.0,
+    Option("target_noise", float, 0.0, "Noise Target", "Stop tracing once every lightmap's noise is at most this many "
+           "per cent of the scene's mean irradiance (0: off); Photons is then the most to trace", minimum=0.0, maximum=100.0,
            soft_maximum=10.0, unit="PERCENTAGE", metavar="PERCENT"),
     Option("time_limit", float, 0.0, "Time Limit", "Stop tracing before the bake has run this many seconds (0: off)",
            minimum=0.0, soft_maximum=3600.0, unit="TIME", metavar="SECONDS"),
