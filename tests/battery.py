@@ -60,26 +60,28 @@ def _patch():
             return out
         staging.FileSet.stage = staged
     go, copy, delay = _env("DETP_TEST_COMMIT_GO"), _env("DETP_TEST_COPY"), float(_env("DETP_TEST_RENAME_DELAY", "0"))
-    if go or copy or delay:
-        replace, first = os.replace, [True]
+    if go:
+        commit = staging.FileSet.commit
+
+        def held(self):
+            _say("holding before commit")
+            while not os.path.exists(go):
+                time.sleep(0.02)
+            time.sleep(float(_env("DETP_TEST_COMMIT_AFTER", "0")))
+            return commit(self)
+        staging.FileSet.commit = held
+    if copy or delay:
+        replace = os.replace
 
         def renamed(src, dst, *a, **k):
-            if ".partial" not in str(src):
-                return replace(src, dst, *a, **k)
-            if go and first[0]:
-                first[0] = False
-                _say("holding before commit")
-                while not os.path.exists(go):
-                    time.sleep(0.02)
-                time.sleep(float(_env("DETP_TEST_COMMIT_AFTER", "0")))
-            if copy:
+            if ".partial" in str(src) and copy:
                 os.makedirs(os.path.join(copy, str(os.getpid())), exist_ok=True)
                 shutil.copyfile(src, os.path.join(copy, str(os.getpid()), os.path.basename(dst)))
             out = replace(src, dst, *a, **k)
-            time.sleep(delay)
+            if ".partial" in str(src):
+                time.sleep(delay)
             return out
         os.replace = renamed
-
 
 if _env("DETP_TEST_HOLD") or _env("DETP_TEST_COMMIT_GO") or _env("DETP_TEST_COPY"):
     _patch()

@@ -88,7 +88,8 @@ def auto_photons(scene: Scene, settings: BakeSettings) -> int:
     AUTO_PHOTONS: more texels need more photons for the same noise per texel."""
     if settings.photons:
         return int(settings.photons)
-    texels = sum((o.resolution if o.resolution > 0 else settings.resolution) ** 2 for o in scene.objects if o.bake)
+    firsts = (scene.objects[members[0]] for _, members in texels_mod.images(scene))  # an atlas counts once
+    texels = sum((o.resolution if o.resolution > 0 else settings.resolution) ** 2 for o in firsts)
     low, high = AUTO_PHOTONS
     return int(min(max(PHOTONS_PER_TEXEL * texels, low), high))
 
@@ -647,12 +648,13 @@ def _denoised_parts(settings, texels, lm, value, direct, sharp, regions, frag, m
 def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) -> memory.Estimate:
     """The bake's peak memory, estimated before any work; over the budget (the setting, else 80 %
     of what the system has free) it is a BakeError that says what to lower."""
-    pixels = sum(o.resolution * o.resolution for o in scene.objects if o.bake)
+    # One image per lightmap: an atlas's objects share theirs (each carries the atlas's resolution).
+    sizes = [int(scene.objects[members[0]].resolution) ** 2 for _, members in texels_mod.images(scene)]
+    pixels = sum(sizes)
     per_texel = {n: estimators.get(n).bytes_per_texel for n in names}
     hits = int(settings.photons * per_photon_kept) if any(estimators.get(n).stores_hits for n in names) else 0
     geometry = scene.positions.nbytes + scene.normals.nbytes + scene.uvs.nbytes + 24 * scene.triangle_count
-    denoised = max((o.resolution * o.resolution for o in scene.objects if o.bake), default=0) \
-        if settings.denoise and denoise_mod.available() else 0
+    denoised = max(sizes, default=0) if settings.denoise and denoise_mod.available() else 0
     need = memory.estimate(pixels, per_texel, batch, per_photon, per_photon_kept,
                            settings.threads or os.cpu_count() or 1, hits, geometry, denoised,
                            settings.directional != "none", bool(settings.shadowmask))
