@@ -43,10 +43,10 @@ def _patch():
     if phase == "trace":
         trace = bake.trace_batches
 
-        def traced(*a, **k):
-            for part in trace(*a, **k):
-                yield part
-                _hold(phase)
+        def traced(*a, **k):  # a run of batches traced, then held before it is summed
+            part = trace(*a, **k)
+            _hold(phase)
+            return part
         bake.trace_batches = traced
     if phase == "denoise":
         one = denoise.denoise_lightmap
