@@ -6,6 +6,8 @@ from typing import Callable, Iterable
 
 import bpy
 
+from ..errors import BakeError
+
 
 def unwrap_into(obj, uv_name: str, unwrap: Callable[[], None]) -> None:
     """Run a UV operator (`unwrap`, called in edit mode with all faces selected) into `uv_name`,
@@ -34,6 +36,17 @@ def unwrap_into(obj, uv_name: str, unwrap: Callable[[], None]) -> None:
         view_layer.objects.active = active
     if previous is not None and previous in me.uv_layers:
         me.uv_layers.active = me.uv_layers[previous]
+
+
+def check_can_add(obj, uv_name: str) -> None:
+    """A UV layer cannot be added to linked data (it is read-only here): say so before any work,
+    naming the object, its library and the fixes, instead of failing inside Blender's operator."""
+    library = getattr(obj.data, "library", None) or obj.library
+    if library is not None and uv_name not in obj.data.uv_layers:
+        path = bpy.path.abspath(library.filepath, library=library.library)
+        raise BakeError(f"object '{obj.name}' is linked from '{path}' and has no UV layer '{uv_name}', which cannot be "
+                        f"added to linked data: add it in that file, or make the object local "
+                        f"(Object > Relations > Make Local)")
 
 
 def ensure_lightmap_uv(obj, uv_name: str, margin: float = 1.0) -> bool:

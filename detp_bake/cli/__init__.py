@@ -147,6 +147,10 @@ def _open_scene(args, settings, bl_scene, warn=output.log):
                                  created, max_bytes=geometry_budget(settings.memory_budget_mb) or None,
                                  atlas=settings, warn=warn)
     _warn_created(args, created, warn)
+    for name, (flat, total) in scene.export_stats.get("degenerate_triangles", {}).items():
+        warn(f"object '{name}': {flat} of its {total} triangles have no area (collapsed faces, zero-length edges) "
+             "and are left out; they carry no light, so its lightmap is as it would be without them "
+             "(Mesh > Clean Up > Degenerate Dissolve removes them)")
     _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
          f"baking {sum(o.bake for o in scene.objects)} objects")
     return blender, bl_scene, scene, out_dir, time.perf_counter() - t0

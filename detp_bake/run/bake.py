@@ -78,7 +78,8 @@ def auto_photons(scene: Scene, settings: BakeSettings) -> int:
     AUTO_PHOTONS: more texels need more photons for the same noise per texel."""
     if settings.photons:
         return int(settings.photons)
-    texels = sum((o.resolution if o.resolution > 0 else settings.resolution) ** 2 for o in scene.objects if o.bake)
+    firsts = (scene.objects[members[0]] for _, members in texels_mod.images(scene))  # an atlas counts once
+    texels = sum((o.resolution if o.resolution > 0 else settings.resolution) ** 2 for o in firsts)
     low, high = AUTO_PHOTONS
     return int(min(max(PHOTONS_PER_TEXEL * texels, low), high))
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 from .. import estimators
 from ..errors import BakeError
-from ..lightmap import denoise as denoise_mod
+from ..lightmap import denoise as denoise_mod, texels as texels_mod
 from ..transport.photons import PhotonTracer
 
 SEGMENT_BYTES = 40  # origin, direction, length, flux (float32)
@@ -216,12 +216,13 @@ def reset_peak() -> None:
 def check(scene, settings, names, batch, per_photon, per_photon_kept) -> Estimate:
     """The bake's peak memory, estimated before any work; over the budget (the setting, else 80 %
     of what the system has free) it is a BakeError that says what to lower."""
-    pixels = sum(o.resolution * o.resolution for o in scene.objects if o.bake)
+    # One image per lightmap: an atlas's objects share theirs (each carries the atlas's resolution).
+    sizes = [int(scene.objects[members[0]].resolution) ** 2 for _, members in texels_mod.images(scene)]
+    pixels = sum(sizes)
     per_texel = {n: estimators.get(n).bytes_per_texel for n in names}
     hits = int(settings.photons * per_photon_kept) if any(estimators.get(n).stores_hits for n in names) else 0
     geometry = scene.positions.nbytes + scene.normals.nbytes + scene.uvs.nbytes + 24 * scene.triangle_count
-    denoised = max((o.resolution * o.resolution for o in scene.objects if o.bake), default=0) \
-        if settings.denoise and denoise_mod.available() else 0
+    denoised = max(sizes, default=0) if settings.denoise and denoise_mod.available() else 0
     need = estimate(pixels, per_texel, batch, per_photon, per_photon_kept,
                            settings.threads or os.cpu_count() or 1, hits, geometry, denoised,
                            settings.directional != "none", bool(settings.shadowmask))
