@@ -175,7 +175,7 @@ OPTIONS = (
     Option("atlas_padding", int, 2, "Atlas Padding", "Empty texels between charts in an atlas (at least 2: no "
            "texel is shared under bilinear filtering)", minimum=1, maximum=64, metavar="TEXELS", lightmaps="atlas"),
     Option("atlas_charts", str, "layout", "Atlas Charts", "What is packed into the atlases",
-           choices=(("layout", "Object Layouts", "Each object's lightmap UV layer as it is (made by Lightmap Pack "
+           choices=(("layout", "Object Layouts", "Each object's lightmap UV layer as it is (made with xatlas charts "
                      "where it has none), as one block, scaled to the density and placed"),
                     ("islands", "Islands", "The islands of each object's lightmap UV layer, each scaled to the "
                      "density and placed on its own"),

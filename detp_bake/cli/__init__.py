@@ -64,7 +64,7 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake (default: all visible meshes)")
     _option_arguments(b)
     b.add_argument("--uv-layer", default=None,
-                   help=f"lightmap UV layer (default '{options.UV_LAYER}', created with Lightmap Pack if missing)")
+                   help=f"lightmap UV layer (default '{options.UV_LAYER}', created with xatlas charts if missing)")
     b.add_argument("--out", required=True, help="output folder")
     b.add_argument("--format", default=",".join(bake_mod.BakeSettings.formats),
                    help=f"comma-separated: {','.join(images.WRITERS)} (default %(default)s)")
