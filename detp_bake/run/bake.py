@@ -478,9 +478,7 @@ def layout_warnings(texels, estimator_settings, radius=None) -> list:
     out = []
     for lm in texels.lightmaps:
         if lm.overlap >= OVERLAP_WARNING:
-            out.append(f"object '{lm.name}': {100 * lm.overlap:.0f} % of its lightmap texels lie under two or more "
-                       "faces (overlapping lightmap UVs, e.g. Array or Mirror copies sharing them): those faces get "
-                       "one shared value; give every face its own UV space (Lightmap Pack)")
+            out.append(_overlap_warning(lm))
         fragmented = charts_mod.warning(lm)
         if fragmented:
             out.append(fragmented)
@@ -502,6 +500,19 @@ def layout_warnings(texels, estimator_settings, radius=None) -> list:
                        f"for {', '.join(wide[:5])}{' …' if len(wide) > 5 else ''}, so each such lightmap is one "
                        f"blurred average: lower {setting[0]}")
     return out
+
+
+def _overlap_warning(lm) -> str:
+    """Overlapping lightmap UVs, by object (an atlas's: the objects whose texels overlap)."""
+    why = ("(overlapping lightmap UVs, e.g. Array or Mirror copies sharing them): those faces get one shared "
+           "value; give every face its own UV space (Unwrap Lightmap UVs, or apply the modifiers that copy faces)")
+    if not lm.placement:
+        return f"object '{lm.name}': {100 * lm.overlap:.0f} % of its lightmap texels lie under two or more faces {why}"
+    named = sorted(((n, p.get("overlap", 0.0)) for n, p in lm.placement.items() if p.get("overlap", 0.0) > 0),
+                   key=lambda np_: -np_[1])
+    listed = ", ".join(f"'{n}' ({100 * v:.0f} %)" for n, v in named[:6]) + (" …" if len(named) > 6 else "")
+    return (f"objects {listed} in atlas '{lm.name}': their lightmap texels lie under two or more faces "
+            f"({100 * lm.overlap:.0f} % of the atlas's) {why}")
 
 
 def indirect_spacing(settings: BakeSettings, frame_state=None) -> int:
