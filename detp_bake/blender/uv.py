@@ -13,9 +13,9 @@ from typing import Callable, Iterable
 import bpy
 import numpy as np
 
-PADDING = 2  # texels between xatlas charts: no texel shared under bilinear filtering
-
 from ..errors import BakeError
+
+PADDING = 2  # texels between xatlas charts: no texel shared under bilinear filtering
 
 
 def unwrap_into(obj, uv_name: str, unwrap: Callable[[], None]) -> None:
