@@ -103,7 +103,8 @@ def _pack(vertices, index, uv, density: float, resolution: int = 0):
     """xatlas's packing of the charts at `density` texels per unit, or scaled by xatlas for a
     `resolution`² lightmap, into one atlas: where xatlas would spread them over several (whose UVs
     would overlap in one layer) they are packed again at its scale into one that grows to fit.
-    Returns (the atlas's side, indices, corner UVs in 0..1 of the side, utilisation)."""
+    Returns (the atlas's side, indices, corner UVs in 0..1 of the side, utilisation), or None when
+    xatlas finds no chart (every face without area: the bake leaves such a mesh out and says so)."""
     import xatlas
 
     for attempt in range(2):
@@ -120,6 +121,8 @@ def _pack(vertices, index, uv, density: float, resolution: int = 0):
         if atlas.atlas_count == 1:
             break
         density, resolution = float(atlas.texels_per_unit), 0
+    if atlas.atlas_count == 0:  # no chart at all: every face without area
+        return None
     _, indices, packed = atlas[0]
     side = max(int(atlas.width), int(atlas.height), 1)
     packed = np.asarray(packed, np.float32) * np.array([atlas.width / side, atlas.height / side], np.float32)
@@ -135,10 +138,11 @@ def xatlas_unwrap(obj, layer: str, resolution: int = 0, density: float = 0.0) ->
     if not len(obj.data.polygons):
         return 0.0
     tri_l, vertices, index, uv = _welded(obj, layer)
-    if density > 0:
-        _, indices, packed, used = _pack(vertices, index, uv, density)
-    else:
-        _, indices, packed, used = _pack(vertices, index, uv, 0.0, int(resolution or 128))
+    packing = _pack(vertices, index, uv, density) if density > 0 else \
+        _pack(vertices, index, uv, 0.0, int(resolution or 128))
+    if packing is None:
+        return 0.0  # Smart UV Project's layer stays
+    _, indices, packed, used = packing
     out = np.zeros((len(obj.data.loops), 2), np.float32)
     out[tri_l] = packed[indices]
     obj.data.uv_layers[layer].uv.foreach_set("vector", out.reshape(-1))

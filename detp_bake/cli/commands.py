@@ -8,10 +8,9 @@ import contextlib
 import sys
 import time
 from pathlib import Path
-from dataclasses import replace
 from typing import Optional
 
-from ..run import bake as bake_mod, frames, job as job_mod
+from ..run import bake as bake_mod, door, frames, job as job_mod
 from ..run.distributed import Cluster
 from ..run.memory import geometry_budget
 from ..run.results import NOISE_UNIT
@@ -39,9 +38,10 @@ def _log(msg: str) -> None:
     print(f"detp_bake: {msg}", file=sys.stderr, flush=True)
 
 
-def _open_scene(args, settings, bl_scene, warn=output.log):
-    """Check the inputs, open the .blend (unless Blender has one open) and export it."""
-    blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene, warn)
+def _open_scene(args, settings, bl_scene, warn=output.log, names=None):
+    """Check the inputs, open the .blend (unless Blender has one open) and export it; the bake's
+    admission (door.py: its settings and output folder checked, once) comes back with the scene."""
+    blender, bl_scene, admission = _check_and_open(args, settings, bl_scene, warn, names)
     t0 = time.perf_counter()
     created = []
     scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
@@ -54,7 +54,7 @@ def _open_scene(args, settings, bl_scene, warn=output.log):
              "(Mesh > Clean Up > Degenerate Dissolve removes them)")
     _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
          f"baking {sum(o.bake for o in scene.objects)} objects")
-    return blender, bl_scene, scene, out_dir, time.perf_counter() - t0
+    return blender, bl_scene, scene, admission, time.perf_counter() - t0
 
 
 def _warn_created(args, created, warn) -> None:
@@ -65,15 +65,15 @@ def _warn_created(args, created, warn) -> None:
              "the lightmaps match it only in a scene saved with it (use --save, or add the layer in Blender)")
 
 
-def _check_and_open(args, settings, bl_scene, warn=output.log):
-    """Check the inputs and open the .blend (unless Blender has one open)."""
-    settings.validate()
+def _check_and_open(args, settings, bl_scene, warn=output.log, names=None):
+    """Check the inputs (the bake's through door.admit) and open the .blend (unless Blender has one
+    open). Returns (the blender adapter, the scene, the admission)."""
     if args.apply and "exr" not in settings.formats:
         raise BakeError("--apply needs the exr format in --format")
     if args.save and (Path(args.save).is_dir() or args.save.endswith(("/", "\\"))):
         raise BakeError(f"--save '{args.save}' is a folder: give the .blend file to save, "
                         f"e.g. --save {Path(args.save) / 'baked.blend'}")
-    out_dir = images.check_writable_dir(args.out)
+    admission = door.admit(settings, names, args.out)
     if args.save:
         images.check_writable_dir(Path(args.save).resolve().parent)
     elif args.apply:
@@ -86,9 +86,12 @@ def _check_and_open(args, settings, bl_scene, warn=output.log):
             raise
         raise BakeError("the 'bpy' module is not installed: run inside Blender or install the bpy wheel "
                         "(make demo sets one up)") from None
+    resources = getattr(args, "resources", None)  # main's: the cluster is closed when the command ends
+    if resources is not None:
+        args.cluster = resources.enter_context(cluster_for(args))
     if bl_scene is None:
         bl_scene = blender.open_blend(Path(args.scene))
-    return blender, bl_scene, out_dir
+    return blender, bl_scene, admission
 
 
 def _check_cancel(cancel) -> None:
@@ -143,11 +146,9 @@ def run_compare(args, bl_scene=None, cancel=None) -> dict:
     settings = settings_from_args(args)
     if args.frames is not None or args.moving or args.static or args.force:
         raise BakeError("--frames, --moving, --static and --force are for 'bake', not 'compare'")
-    for name in args.estimators:
-        replace(settings, estimator=name).validate()
-    blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene, warn)
+    blender, bl_scene, scene, admission, export_seconds = _open_scene(args, settings, bl_scene, warn, args.estimators)
     _check_cancel(cancel)
-    done = _run_job(job_mod.Job(scene, settings, out_dir, args.estimators, export_seconds=export_seconds,
+    done = _run_job(job_mod.Job(scene, admission, None, args.estimators, export_seconds=export_seconds,
                                 warnings=list(warn), cluster=getattr(args, "cluster", None)), cancel, warn)
     summary = done.comparison
     for name in summary["estimators"]:
@@ -176,9 +177,10 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
         _check_gltf(args, settings)
     if args.frames is not None or args.moving or args.static:
         return run_frames(args, settings, bl_scene, cancel, warn)
-    blender, bl_scene, scene, out_dir, export_seconds = _open_scene(args, settings, bl_scene, warn)
+    blender, bl_scene, scene, admission, export_seconds = _open_scene(args, settings, bl_scene, warn)
+    out_dir = admission.out_dir
     _check_cancel(cancel)
-    done = _run_job(job_mod.Job(scene, settings, out_dir, export_seconds=export_seconds, warnings=list(warn),
+    done = _run_job(job_mod.Job(scene, admission, export_seconds=export_seconds, warnings=list(warn),
                                 cluster=getattr(args, "cluster", None), reuse=True, force=args.force), cancel, warn)
     if done.reused:
         names = list(done.reused)
@@ -255,7 +257,8 @@ def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> d
     frame_range = frames.parse_frames(args.frames)
     if args.apply and frame_range.step != 1:
         raise BakeError("--apply with --frames needs every frame (a step of 1): an image sequence has no gaps")
-    blender, bl_scene, out_dir = _check_and_open(args, settings, bl_scene, warn)
+    blender, bl_scene, admission = _check_and_open(args, settings, bl_scene, warn)
+    out_dir = admission.out_dir
     created = []
     scene_at = blender.frame_exporter(bl_scene, args.objects, args.uv_layer, settings.resolution, _log, created,
                                       max_bytes=geometry_budget(settings.memory_budget_mb) or None, atlas=settings)
@@ -292,15 +295,15 @@ def run_frames(args, settings, bl_scene=None, cancel=None, warn=output.log) -> d
 
 
 def cluster_for(args):
-    """The Dask cluster to trace on (--scheduler, --workers), connected once the settings are
-    checked and before the scene is opened; without either, a bake runs here and imports no Dask."""
+    """The Dask cluster to trace on (--scheduler, --workers), connected once the settings have passed
+    the door and before the scene is opened (`_check_and_open`); without either, a bake runs here and
+    imports no Dask."""
     if not (getattr(args, "scheduler", "") or getattr(args, "workers", 0)):  # export-gltf has neither
         return contextlib.nullcontext()
     if args.scheduler and args.workers:
         raise BakeError("--scheduler and --workers: choose one (a cluster of your own, or workers on this machine)")
     if args.workers < 0:
         raise BakeError(f"setting 'workers' = {args.workers}: must be 1 or more")
-    settings_from_args(args).validate()
     cluster = Cluster(args.scheduler, args.workers, timeout=args.connect_timeout)
     cluster.connect()
     info = cluster.describe()

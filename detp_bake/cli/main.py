@@ -2,6 +2,7 @@
 code (0; 2 for a refused bake; 130 when cancelled) and stdout's list of files (or --json summary)."""
 from __future__ import annotations
 
+import contextlib
 import sys
 from typing import Optional, Sequence
 
@@ -9,7 +10,7 @@ from ..run import interrupt
 from . import output
 from ..errors import BakeCancelled, BakeError
 from .arguments import build_parser
-from .commands import cluster_for, run_bake, run_compare, run_export_gltf
+from .commands import run_bake, run_compare, run_export_gltf
 
 
 def main(argv: Optional[Sequence[str]] = None, bl_scene=None) -> int:
@@ -22,7 +23,8 @@ def main(argv: Optional[Sequence[str]] = None, bl_scene=None) -> int:
     with interrupt.cancel_on_signals() as cancel:
         try:
             with output.quiet_stdout():  # Blender's own prints go to stderr
-                with cluster_for(args) as args.cluster:
+                with contextlib.ExitStack() as args.resources:  # a cluster, connected past the door
+                    args.cluster = None
                     summary = run(args, bl_scene, cancel)
         except BakeError as exc:
             print(f"detp_bake: error: {exc}", file=sys.stderr)

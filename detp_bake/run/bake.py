@@ -18,12 +18,12 @@ from typing import Callable, Optional
 import numpy as np
 
 from .. import estimators, options
-from ..lightmap import (charts as charts_mod, denoise as denoise_mod, fragments as fragments_mod, images,
+from ..lightmap import (charts as charts_mod, denoise as denoise_mod, fragments as fragments_mod,
     sites as sites_mod, texels as texels_mod, validity)
 from ..transport import direct as direct_mod, frame_direct
 from . import directional as directional_mod, memory
 from ..errors import BakeCancelled
-from ..options import AUTO_PHOTONS, PHOTONS_PER_TEXEL
+from ..options import PHOTONS_PER_TEXEL
 from ..lightmap.noise import MIN_GROUPS, BatchNoise
 from ..estimators import EstimatorSettings
 from ..estimators.discs import SLAB, capped_radius, disc_radius
@@ -36,52 +36,45 @@ from .results import BakeResult, Progress, RawImages, Snapshot, cancel_fn, previ
 from .settings import BakeSettings  # noqa: F401 (the API)
 from .writing import warn_stale, write, write_many  # noqa: F401 (the API)
 from .finishing import Finishing
+from . import door
+from .door import Admission, admit, auto_photons, with_photons  # noqa: F401 (auto_photons: the API)
 
 # Automatic photon count (photons = 0): PHOTONS_PER_TEXEL for each lightmap texel to bake, within
 # AUTO_PHOTONS. At 16 a texel the default (histogram + OIDN) bake of a fully covered lightmap
 # lands about 4-8 indirect photons a texel; tracing costs about 0.4 s a million photons on 2 cores.
 RAYS_PER_SECOND = 2.0e6  # photon segments traced a second and thread, for the time a bake announces
 
-def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[Progress], None]] = None,
+def compute(scene: Scene, settings: BakeSettings | Admission, progress: Optional[Callable[[Progress], None]] = None,
             cancel=None, cluster=None, frame_state: Optional[estimators.FrameState] = None,
             reach_of=None) -> BakeResult:
     """Trace, estimate and dilate; nothing touches the disk. Raises BakeError or BakeCancelled.
+    `settings`: the bake's settings, checked here (door.admit), or an Admission that passed the door.
     `cluster` (a distributed.Cluster) traces the photons on its workers instead of here.
     `frame_state`: one frame of a range (frames.py), shared by the range's frames. `reach_of`:
     objects whose discs also set how far out sun and sky photons start (`disc_reach`), as if they
     were baked too (incremental.py: a bake that reuses their lightmaps)."""
-    return compute_many(scene, settings, [settings.estimator], progress, cancel, cluster,
-                        frame_state, reach_of=reach_of)[settings.estimator]
+    name = (settings.names[0] if isinstance(settings, Admission) else settings.estimator)
+    return compute_many(scene, settings, [name], progress, cancel, cluster, frame_state, reach_of=reach_of)[name]
 
 
-def compute_many(scene: Scene, settings: BakeSettings, names, progress: Optional[Callable[[Progress], None]] = None,
+def compute_many(scene: Scene, settings: BakeSettings | Admission, names=None, progress: Optional[Callable[[Progress], None]] = None,
                  cancel=None, cluster=None, frame_state: Optional[estimators.FrameState] = None, stop=None,
                  preview: Optional[Callable[[Snapshot], None]] = None, reach_of=None) -> dict:
     """Like `compute`, for several estimators fed the very same photons: every batch goes to each
     of them as it is traced. Returns {estimator name: BakeResult}. `settings.threads` (0: all
     cores) holds for tracing, shadow rays and the compiled estimators alike. `stop()` true ends
     tracing after the batch, keeping what there is as a finished bake (stopped_by "user");
-    `preview` sees the bake after every block of batches (Snapshot), whatever the estimator."""
+    `preview` sees the bake after every block of batches (Snapshot), whatever the estimator. An
+    Admission's own estimators are baked (`names` is for plain settings, which are checked here)."""
     import numba
     before = numba.get_num_threads()
-    if settings.threads:
-        numba.set_num_threads(max(1, min(int(settings.threads), numba.config.NUMBA_NUM_THREADS)))
+    threads = (settings.settings if isinstance(settings, Admission) else settings).threads
+    if threads:
+        numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
     try:
         return _compute_many(scene, settings, names, progress, cancel, cluster, frame_state, stop, preview, reach_of)
     finally:
         numba.set_num_threads(before)
-
-
-def auto_photons(scene: Scene, settings: BakeSettings) -> int:
-    """The photons a bake traces: the setting, or when it is 0, PHOTONS_PER_TEXEL for every texel
-    of the lightmaps to bake (objects without a resolution of their own take the setting's), within
-    AUTO_PHOTONS: more texels need more photons for the same noise per texel."""
-    if settings.photons:
-        return int(settings.photons)
-    firsts = (scene.objects[members[0]] for _, members in texels_mod.images(scene))  # an atlas counts once
-    texels = sum((o.resolution if o.resolution > 0 else settings.resolution) ** 2 for o in firsts)
-    low, high = AUTO_PHOTONS
-    return int(min(max(PHOTONS_PER_TEXEL * texels, low), high))
 
 
 def _wide(settings: BakeSettings) -> BakeSettings:
@@ -129,15 +122,13 @@ class _Pipeline:
     def __init__(self, scene, settings, names, progress, cancel, cluster, frame_state, stop, preview):
         memory.return_large_blocks()  # freed arrays go back to the system (glibc)
         memory.reset_peak()  # report.json's peak is this bake's
-        self.names = list(dict.fromkeys(names))
-        settings = _wide(settings)
-        for name in self.names:
-            replace(settings, estimator=name).validate()
-        directional_mod.check(settings, self.names, frame_state)
+        admitted = door.admitted(settings, names, frame_state=frame_state)
+        admitted = with_photons(admitted, scene)  # chosen here unless the front end chose them
+        self.names = list(admitted.names)
         scene.check()
-        directional_mod.check_shadowmask(settings, scene, frame_state)
-        automatic = not settings.photons
-        self.settings = settings = replace(settings, photons=auto_photons(scene, settings))
+        directional_mod.check_shadowmask(admitted.settings, scene, frame_state)
+        automatic = admitted.automatic
+        self.settings = settings = _wide(admitted.settings)
         self.scene, self.offset = scene.recentred()  # float32 rays and discs work near the origin (scene.py)
         self.report = progress or (lambda p: None)
         self.cancelled = cancel_fn(cancel)
@@ -563,10 +554,8 @@ def _value(est, direct_e, share) -> np.ndarray:
 def bake(scene: Scene, settings: BakeSettings, out_dir: str | os.PathLike,
          progress: Optional[Callable[[Progress], None]] = None, cancel=None,
          export_seconds: float = 0.0, cluster=None) -> BakeResult:
-    """Check the output folder first, then compute and write."""
-    settings.validate()
-    images.check_writable_dir(out_dir)
-    result = compute(scene, settings, progress, cancel, cluster)
+    """Check the settings and the output folder first (door.admit), then compute and write."""
+    result = compute(scene, admit(settings, out_dir=out_dir), progress, cancel, cluster)
     result.seconds["export"] = export_seconds
     write(result, out_dir, progress, cancel)
     return result
