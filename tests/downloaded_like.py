@@ -5,8 +5,8 @@
 - CrateA, CrateB: two objects sharing one material, Shared.
 - Glow: an Emission shader, no Principled BSDF; Bust: a material whose surface is a node group.
 - Statue: exported but not baked (the tests bake the others by name).
-- Town: a block of 36 boxes joined into one mesh of 216 quads with render UVs and no lightmap UV
-  layer, so the bake has to make one.
+- Town: a block of 16 boxes, their faces cut in 3×3 quads, joined into one mesh of 864 quads with
+  render UVs and no lightmap UV layer, so the bake has to make one.
 """
 import sys
 
@@ -88,11 +88,12 @@ def build() -> None:
     _object("Bust", lambda bm: _box(bm, (2.5, 2, 0), (3, 3, 1.5)), [_surface("Plaster", "group")])
     _object("Statue", lambda bm: _box(bm, (0, 2.5, 0), (0.5, 3, 1.2)), [shared])
 
-    def town(bm):
-        for i in range(6):
-            for j in range(6):
-                x, y = -1.5 + 0.5 * i, -1.5 + 0.5 * j
-                _box(bm, (x, y, 0.01), (x + 0.35, y + 0.35, 0.2 + 0.1 * ((i * 7 + j * 3) % 5)))
+    def town(bm):  # facades cut in 3×3 quads, as a game level's walls are
+        for i in range(4):
+            for j in range(4):
+                x, y = -1.5 + 0.8 * i, -1.5 + 0.8 * j
+                _box(bm, (x, y, 0.01), (x + 0.6, y + 0.6, 0.4 + 0.2 * ((i * 7 + j * 3) % 5)))
+        bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=2, use_grid_fill=True)
     _object("Town", town, [_principled("Brick", (0.6, 0.4, 0.3))])
     light = bpy.data.lights.new("Lamp", "POINT")
     light.energy = 800.0
