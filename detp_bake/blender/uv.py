@@ -1,10 +1,19 @@
-"""Lightmap UV layers: created with Blender's own unwrapping when missing, removed again when a bake
-that created them is cancelled."""
+"""Lightmap UV layers: created when missing (xatlas charts, `xatlas_unwrap`), removed again when a
+bake that created them is cancelled.
+
+A created layer is xatlas's: Smart UV Project's charts (whole polygons) packed at the lightmap's
+size or texel density with a 2-texel padding. Lightmap Pack, which the bake used before, gives one
+chart per face: on a level of 36,167 faces 36,015 charts under a texel wide, 82 % of the texels on
+a chart's border. The panel's Unwrap button runs the same function.
+"""
 from __future__ import annotations
 
 from typing import Callable, Iterable
 
 import bpy
+import numpy as np
+
+PADDING = 2  # texels between xatlas charts: no texel shared under bilinear filtering
 
 
 def unwrap_into(obj, uv_name: str, unwrap: Callable[[], None]) -> None:
@@ -36,14 +45,92 @@ def unwrap_into(obj, uv_name: str, unwrap: Callable[[], None]) -> None:
         me.uv_layers.active = me.uv_layers[previous]
 
 
-def ensure_lightmap_uv(obj, uv_name: str, margin: float = 1.0) -> bool:
-    """Create `uv_name` with Blender's Lightmap Pack when it is missing; keep the active UV layer.
-    Returns True when the layer was created."""
+def lightmap_pack(obj, uv_name: str, margin: float = 1.0) -> None:
+    """Blender's Lightmap Pack into `uv_name` (one chart per face), replacing the layer."""
     if uv_name in obj.data.uv_layers:
-        return False
+        obj.data.uv_layers.remove(obj.data.uv_layers[uv_name])
     unwrap_into(obj, uv_name, lambda: bpy.ops.uv.lightmap_pack(
         PREF_CONTEXT="ALL_FACES", PREF_PACK_IN_ONE=True, PREF_NEW_UVLAYER=False, PREF_MARGIN_DIV=margin))
+
+
+def ensure_lightmap_uv(obj, uv_name: str, resolution: int = 0, density: float = 0.0) -> bool:
+    """Create `uv_name` with xatlas charts (`xatlas_unwrap`) when it is missing; keep the active UV
+    layer. Returns True when the layer was created."""
+    if uv_name in obj.data.uv_layers:
+        return False
+    xatlas_unwrap(obj, uv_name, resolution, density)
     return True
+
+
+def _welded(obj, layer: str):
+    """(corner loops of the triangles (T, 3), xatlas vertices, their indices (T, 3), their UVs):
+    one vertex per (mesh vertex, UV) pair, so islands stay joined and seams stay seams; positions
+    in the object's scaled space (texels per metre hold on a scaled object)."""
+    me = obj.data
+    me.calc_loop_triangles()
+    tri_l = np.empty(len(me.loop_triangles) * 3, np.int64)
+    me.loop_triangles.foreach_get("loops", tri_l)
+    loop_v = np.empty(len(me.loops), np.int64)
+    me.loops.foreach_get("vertex_index", loop_v)
+    co = np.empty(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3) * np.abs(np.array(obj.matrix_world.to_scale(), np.float32))
+    uv = np.empty(len(me.loops) * 2, np.float32)
+    me.uv_layers[layer].uv.foreach_get("vector", uv)
+    uv = uv.reshape(-1, 2)
+    keys, vertex_of_loop = np.unique(np.c_[loop_v, np.round(uv * 1e6)], axis=0, return_inverse=True)
+    vertex_of_loop = vertex_of_loop.reshape(-1)
+    first = np.zeros(len(keys), np.int64)
+    first[vertex_of_loop] = np.arange(len(vertex_of_loop))
+    index = vertex_of_loop[tri_l].reshape(-1, 3).astype(np.uint32)
+    return tri_l.reshape(-1, 3), np.ascontiguousarray(co[loop_v[first]]), index, np.ascontiguousarray(uv[first])
+
+
+def _pack(vertices, index, uv, density: float):
+    """xatlas's packing of the charts at `density` texels per unit, into one atlas that grows to
+    fit (so never into several, whose UVs would overlap): (its side, indices, corner UVs in 0..1 of
+    the side, utilisation)."""
+    import xatlas
+
+    atlas = xatlas.Atlas()
+    atlas.add_mesh(vertices, index, None, uv)
+    charts = xatlas.ChartOptions()
+    charts.use_input_mesh_uvs = True
+    pack = xatlas.PackOptions()
+    pack.texels_per_unit = float(density)
+    pack.padding = PADDING
+    pack.bilinear = True
+    atlas.generate(charts, pack)
+    _, indices, packed = atlas[0]
+    side = max(int(atlas.width), int(atlas.height), 1)
+    packed = np.asarray(packed, np.float32) * np.array([atlas.width / side, atlas.height / side], np.float32)
+    return side, np.asarray(indices, np.int64).reshape(-1, 3), packed, float(np.ravel(atlas.utilization)[0])
+
+
+def xatlas_unwrap(obj, layer: str, resolution: int = 0, density: float = 0.0) -> float:
+    """Charts from Smart UV Project (whole polygons, so every face keeps consistent UVs), packed by
+    xatlas with a PADDING-texel bilinear padding into `layer` (created or replaced; no other layer
+    changes): at `density` texels per metre (an atlas's objects), else filling a `resolution`²
+    lightmap. UVs in 0..1 of the layout's longer side. Returns xatlas's utilisation."""
+    unwrap_into(obj, layer, lambda: bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0))
+    if not len(obj.data.polygons):
+        return 0.0
+    tri_l, vertices, index, uv = _welded(obj, layer)
+    p = vertices[index.astype(np.int64)]
+    area = float(0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
+    target = int(resolution or 128)
+    scale = density if density > 0 else target * np.sqrt(0.5 / max(area, 1e-12))
+    for _ in range(4):  # at a resolution: smaller until the layout and its padding fit the lightmap
+        side, indices, packed, used = _pack(vertices, index, uv, scale)
+        if density > 0 or side <= target:
+            break
+        scale *= 0.97 * target / side
+    if density <= 0:
+        packed *= np.float32(side / max(side, target))  # in 0..1 of the lightmap, not of the layout
+    out = np.zeros((len(obj.data.loops), 2), np.float32)
+    out[tri_l] = packed[indices]
+    obj.data.uv_layers[layer].uv.foreach_set("vector", out.reshape(-1))
+    return used * (side / max(side, target)) ** 2 if density <= 0 else used
 
 
 def remove_uv_layers(bl_scene, created: Iterable) -> None:

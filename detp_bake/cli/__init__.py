@@ -92,8 +92,17 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--json", action="store_true", help="print a JSON summary on stdout instead of the file list")
 
 
+class _Given(argparse.Action):
+    """Store the value and note the setting as given (options.unused: a flag that does nothing)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        namespace.given = set(getattr(namespace, "given", ())) | {self.dest}
+
+
 def _option_arguments(b) -> None:
     """One option per setting of options.py: its default, choices and help from there."""
+    b.set_defaults(given=frozenset())
     for opt in options.OPTIONS:
         default = "on" if opt.default else "off"
         if opt.kind is bool:
@@ -109,12 +118,15 @@ def _option_arguments(b) -> None:
         if choices:
             text += " (" + "; ".join(f"{v}: {h}" for v, _, h in opt.choice_list) + ")"
         b.add_argument(opt.flag, type=opt.kind, default=opt.default, choices=choices, metavar=opt.metavar,
-                       help=text.replace("%", "%%") + " (default %(default)s)")
+                       action=_Given, help=text.replace("%", "%%") + " (default %(default)s)")
 
 
 def settings_from_args(args) -> bake_mod.BakeSettings:
     """The bake settings of the parsed command line (BakeSettings.from_choices, as the panel)."""
     formats = tuple(f.strip().lower() for f in args.format.split(",") if f.strip())
+    idle = options.unused(getattr(args, "given", ()), args.lightmaps)
+    if idle:
+        raise BakeError(idle)
     return bake_mod.BakeSettings.from_choices({o.name: getattr(args, o.name) for o in options.OPTIONS},
                                               formats=formats, half=args.half, keep_raw=args.keep_raw)
 

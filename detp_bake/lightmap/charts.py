@@ -63,6 +63,17 @@ def chart_widths(uv: np.ndarray, positions: np.ndarray, res: int) -> tuple[np.nd
     return chart, 4.0 * np.bincount(chart, weights=area, minlength=count) / np.maximum(perimeter, 1e-300) * res
 
 
+def _border(owner: np.ndarray, res: int) -> np.ndarray:
+    """(res, res) bool: covered texels with a 4-neighbour of another chart (or none); `owner` the
+    (res²,) chart of each texel, −1 where none."""
+    grid = np.pad(owner.reshape(res, res), 1, constant_values=-1)
+    mine = grid[1:-1, 1:-1]
+    border = np.zeros_like(mine, bool)
+    for other in (grid[:-2, 1:-1], grid[2:, 1:-1], grid[1:-1, :-2], grid[1:-1, 2:]):
+        border |= other != mine
+    return border & (mine >= 0)
+
+
 def chart_stats(uv: np.ndarray, positions: np.ndarray, res: int, pixel: np.ndarray,
                 texel_tri: np.ndarray) -> tuple[int, float, float]:
     """(charts, median chart width in texels, share of border texels) of one object's lightmap of
@@ -71,24 +82,68 @@ def chart_stats(uv: np.ndarray, positions: np.ndarray, res: int, pixel: np.ndarr
     if len(uv) == 0 or len(pixel) == 0:
         return 0 if len(uv) == 0 else chart_of_triangles(uv, positions)[0], 0.0, 0.0
     chart, width = chart_widths(uv, positions, res)
-    count = len(width)
     owner = np.full(res * res, -1, np.int64)
     owner[pixel] = chart[texel_tri]
-    grid = np.pad(owner.reshape(res, res), 1, constant_values=-1)
-    mine = grid[1:-1, 1:-1]
-    border = np.zeros_like(mine, bool)
-    for other in (grid[:-2, 1:-1], grid[2:, 1:-1], grid[1:-1, :-2], grid[1:-1, 2:]):
-        border |= other != mine
-    border &= mine >= 0
-    return count, float(np.median(width)), float(border.sum()) / len(pixel)
+    return len(width), float(np.median(width)), float(_border(owner, res).sum()) / len(pixel)
+
+
+def member_stats(uv: np.ndarray, positions: np.ndarray, res: int, pixel: np.ndarray, texel_tri: np.ndarray,
+                 member: np.ndarray, count: int) -> list:
+    """chart_stats of each of `count` objects sharing an atlas, `member` the (T,) object of each
+    triangle: [(charts, median width, share of its texels on a border)]: which objects of an
+    atlas are fragmented, to name them."""
+    if len(uv) == 0 or len(pixel) == 0:
+        return [(0, 0.0, 0.0)] * count
+    chart, width = chart_widths(uv, positions, res)
+    owner = np.full(res * res, -1, np.int64)
+    owner[pixel] = chart[texel_tri]
+    on_border = _border(owner, res).reshape(-1)[pixel]
+    of_texel = member[texel_tri]
+    of_chart = np.zeros(len(width), np.int64)
+    of_chart[chart] = member
+    out = []
+    for k in range(count):
+        mine = of_chart == k
+        texels = of_texel == k
+        out.append((int(mine.sum()), float(np.median(width[mine])) if mine.any() else 0.0,
+                    float(on_border[texels].mean()) if texels.any() else 0.0))
+    return out
+
+
+def fragmented(count: int, width: float, border: float) -> bool:
+    return count > 0 and (width < NARROW or border > BORDER)
 
 
 def warning(lm) -> str | None:
-    """The warning for a fragmented lightmap (a Lightmap of texels.py), or None."""
-    if lm.charts == 0 or (lm.chart_width >= NARROW and lm.border <= BORDER):
+    """The warning for a fragmented lightmap (a Lightmap of texels.py), or None; an atlas's names
+    its fragmented objects, not the atlas."""
+    if lm.placement:
+        return _atlas_warning(lm)
+    if not fragmented(lm.charts, lm.chart_width, lm.border):
         return None
     suggest = int(min(16384, 2 ** np.ceil(np.log2(lm.width * max(NARROW / max(lm.chart_width, 1e-3), 1.0)))))
     return (f"object '{lm.name}': its lightmap UVs are {lm.charts:,} charts with a median width of "
             f"{lm.chart_width:.1f} texels at {lm.width}x{lm.height}, and {100 * lm.border:.0f} % of its texels lie "
             "on a chart's border (few photons, fragments for the denoiser, seams): unwrap it with Unwrap Lightmap UVs "
-            f"(xatlas: merged charts at the lightmap's texel density) or raise its resolution to about {suggest}")
+            f"(xatlas: merged charts at the lightmap's texel density) or raise its resolution to about {suggest} "
+            "(--resolution)")
+
+
+def _atlas_warning(lm) -> str | None:
+    """The objects of an atlas whose own charts are fragmented, worst first."""
+    bad = [(name, c) for name, place in lm.placement.items() for c in [place.get("charts")]
+           if c and fragmented(c["count"], c["median_width"], c["border"])]
+    if not bad:
+        return None
+    bad.sort(key=lambda nc: nc[1]["median_width"])
+    named = ", ".join(f"'{n}' ({c['count']:,} charts, median {c['median_width']:.1f} texels wide, "
+                      f"{100 * c['border']:.0f} % of its texels on a border)" for n, c in bad[:6])
+    more = f" and {len(bad) - 6} more" if len(bad) > 6 else ""
+    widest = min(c["median_width"] for _, c in bad)
+    density = 1.0 / lm.texel_size if lm.texel_size > 0 else 0.0
+    suggest = f"{density * max(NARROW / max(widest, 1e-3), 1.0):.3g}"
+    return (f"{'objects' if len(bad) > 1 else 'object'} {named}{more} in atlas '{lm.name}': "
+            f"{'their' if len(bad) > 1 else 'its'} lightmap UVs are fragmented (few photons, fragments for the "
+            "denoiser, seams): select them and click Unwrap Lightmap UVs › xatlas in the Lightmap panel (or remove "
+            "their lightmap UV layer: the bake then makes xatlas charts), or raise the texel density to about "
+            f"{suggest} (--texel-density)")

@@ -345,6 +345,7 @@ def rasterise(scene: Scene) -> TexelSet:
         lm.count, lm.texel_size = len(pixel), _texel_size(world_area, uv_area, sl, res)
         if obj.image:
             lm.placement = _placement(scene, members, tri, pixel, res, world_area, uv_area)
+            _member_charts(scene, lm, members, sl, uv, pixel, local, res)
         # Positions and normals last, once the pixel grids are gone: the peak is what the TexelSet keeps.
         pos = np.empty((len(pixel), 3))
         nrm = np.empty((len(pixel), 3))
@@ -413,6 +414,17 @@ def _placement(scene: Scene, members, tri, pixel, res, world_area, uv_area) -> d
         out[obj.name] = {"texels": int(mine.size), "rect": rect,
                          "texel_size": _texel_size(world_area, uv_area, obj.triangles, res)}
     return out
+
+
+def _member_charts(scene: Scene, lm: Lightmap, members, sl, uv, pixel, local, res) -> None:
+    """Each atlas object's own charts (charts.member_stats) into its placement: the chart warning
+    names objects, not the atlas."""
+    firsts = [scene.objects[i].first_triangle for i in members]
+    member = np.searchsorted(firsts, sl, side="right") - 1
+    stats = charts_mod.member_stats(uv[sl], scene.positions[sl], res, pixel, local, member, len(members))
+    for i, (count, width, border) in zip(members, stats):
+        lm.placement[scene.objects[i].name]["charts"] = {"count": count, "median_width": round(width, 2),
+                                                         "border": round(border, 4)}
 
 
 def geometric_normals(scene: Scene, triangle: np.ndarray, towards: np.ndarray) -> np.ndarray:
