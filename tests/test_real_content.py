@@ -28,7 +28,13 @@ SCENES = ROOT / "sample_scenes" / "downloaded"
 NAMES = ["dish_and_vases", "lamp", "living_room"]
 SMALL = ["--photons", "20000", "--direct-samples", "2"]
 ATLAS = ["--lightmaps", "atlas", "--texel-density", "64", "--atlas-size", "256", "--directional", "sh"]
-OBJECT = ["--resolution", "16", "--shadowmask", "Sun"]
+OBJECT = ["--resolution", "16", "--shadowmask", "Sun", "--no-denoise"]
+# What each scene exercises beside its meshes (sample_scenes/downloaded/README.md).
+FEATURES = {
+    "dish_and_vases": {"hidden": 1, "instances": 1, "shared_meshes": 3, "lights": 1, "uv_maps": 1, "unused_slots": 0},
+    "lamp": {"hidden": 0, "instances": 0, "shared_meshes": 0, "lights": 6, "uv_maps": 1, "unused_slots": 0},
+    "living_room": {"hidden": 4, "instances": 0, "shared_meshes": 4, "lights": 2, "uv_maps": 2, "unused_slots": 4},
+}
 SHOT_SIZE = 120
 BACKGROUND = np.array([0x20, 0x21, 0x24]) / 255.0  # the viewer's clear colour (sRGB)
 
@@ -55,6 +61,11 @@ def _scene_facts(bpy, path):
         "slots": {o.name: [s.material.name if s.material else None for s in o.material_slots] for o in meshes},
         "uv": {o.name: [uv.name for uv in o.data.uv_layers] for o in meshes},
         "kinds": sorted({o.type for o in scene.objects}),
+        "lights": sum(o.type == 'LIGHT' for o in scene.objects),
+        "instances": sum(o.instance_type == 'COLLECTION' and o.instance_collection is not None for o in scene.objects),
+        "shared_meshes": sum(m.users > 1 for m in bpy.data.meshes),
+        "unused_slots": sum(len(o.material_slots) - len({p.material_index for p in o.data.polygons}) for o in meshes),
+        "uv_maps": max(len(o.data.uv_layers) for o in meshes),
     }
 
 
@@ -70,8 +81,9 @@ def baked(request, bpy, tmp_path_factory):
 
 def test_the_scenes_are_what_real_files_are(baked):
     facts = baked["facts"]
-    assert {"CAMERA", "LIGHT", "MESH"} <= set(facts["kinds"])
-    assert len(facts["visible"]) >= 8 and facts["hidden"]
+    assert {"CAMERA", "LIGHT", "MESH"} <= set(facts["kinds"]) and len(facts["visible"]) >= 8
+    got = {k: facts[k] if k != "hidden" else len(facts[k]) for k in FEATURES[baked["name"]]}
+    assert got == FEATURES[baked["name"]]
     assert not any("Lightmap" in layers for layers in facts["uv"].values())  # the bake makes them
 
 
@@ -105,8 +117,9 @@ def test_atlas_charts_lie_apart(baked):
     """No atlas texel under two objects' or two faces' charts: the bake says so when they overlap."""
     printed, report = baked["atlas"]
     assert "overlapping lightmap UVs" not in printed, [w for w in report["warnings"] if "overlapping" in w]
-    atlases = {e["image"] for e in report["objects"]}
-    assert 1 <= len(atlases) <= 6
+    assert {e["image"] for e in report["objects"]} == {a["name"] for a in report["atlases"]}
+    assert sorted(n for a in report["atlases"] for n in a["objects"]) == sorted(e["name"] for e in report["objects"])
+    assert all(a["size"] <= 256 and 0 < a["fill"] <= 1 for a in report["atlases"]), report["atlases"]
 
 
 def test_sh_maps_and_the_shadow_mask(baked):
