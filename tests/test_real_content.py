@@ -66,7 +66,20 @@ def _scene_facts(bpy, path):
         "shared_meshes": sum(m.users > 1 for m in bpy.data.meshes),
         "unused_slots": sum(len(o.material_slots) - len({p.material_index for p in o.data.polygons}) for o in meshes),
         "uv_maps": max(len(o.data.uv_layers) for o in meshes),
+        "cut_out": _cut_out_materials(bpy),
     }
+
+
+def _cut_out_materials(bpy):
+    """{material: whether the bake reads an opacity image} for every material whose Principled
+    BSDF's Alpha is linked (the importer's alpha masks and blends)."""
+    from detp_bake.blender.materials import read_surface
+    out = {}
+    for mat in bpy.data.materials:
+        nodes = mat.node_tree.nodes if mat.node_tree else []
+        if any(n.type == 'BSDF_PRINCIPLED' and n.inputs["Alpha"].is_linked for n in nodes):
+            out[mat.name] = read_surface(mat, True).opacity_image is not None
+    return out
 
 
 @pytest.fixture(scope="module", params=NAMES)
@@ -85,6 +98,16 @@ def test_the_scenes_are_what_real_files_are(baked):
     got = {k: facts[k] if k != "hidden" else len(facts[k]) for k in FEATURES[baked["name"]]}
     assert got == FEATURES[baked["name"]]
     assert not any("Lightmap" in layers for layers in facts["uv"].values())  # the bake makes them
+
+
+def test_alpha_masked_leaves_are_cut_out(baked):
+    """Blender's importer turns alphaMode MASK into 1 - (alpha < cutoff): the bake must still read
+    the image's alpha, or the flowers' leaves and the lamp's grill bake as opaque cards."""
+    cut_out = baked["facts"]["cut_out"]
+    expected = {"dish_and_vases": {"Flowers"}, "lamp": set(), "living_room": {"grill", "stainedglass"}}
+    assert set(cut_out) == expected[baked["name"]] and all(cut_out.values()), cut_out
+    if baked["name"] == "living_room":
+        assert baked["atlas"][1]["alpha"]["passes"] > 0  # photons went through the grill and the glass
 
 
 def test_every_visible_mesh_is_baked_and_no_hidden_one(baked):

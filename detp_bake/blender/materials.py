@@ -277,6 +277,28 @@ def read_surface(mat, has_nodes: bool) -> Surface:
     return s
 
 
+def _alpha_image(src):
+    """The Image Texture whose Alpha output `src` is, or None."""
+    return src[0] if src is not None and src[0].type == "TEX_IMAGE" and src[1].name == "Alpha" else None
+
+
+def _alpha_mask_image(src):
+    """The Image Texture under an alpha cut-off as Blender's glTF importer builds one for alphaMode
+    MASK, 1 − (alpha < cutoff), or as Greater Than or Round on the alpha; None for anything else.
+    The image's alpha stands for the mask: a mask's alpha is 0 or 1 nearly everywhere, and reading
+    the threshold as such would lose the leaves of every imported plant to opaque cards."""
+    if src is None or src[0].type != "MATH":
+        return None
+    math = src[0]
+    if math.operation in ("GREATER_THAN", "ROUND"):
+        return _alpha_image(linked_socket(math.inputs[0]))
+    if math.operation == "SUBTRACT" and not math.inputs[0].is_linked and math.inputs[0].default_value == 1.0:
+        inner = linked_socket(math.inputs[1])
+        if inner is not None and inner[0].type == "MATH" and inner[0].operation == "LESS_THAN":
+            return _alpha_image(linked_socket(inner[0].inputs[0]))
+    return None
+
+
 def _shader(node, notes) -> Surface:
     t = node.type
     if t == "BSDF_PRINCIPLED":
@@ -286,8 +308,9 @@ def _shader(node, notes) -> Surface:
         s = Surface(albedo=base * diffuse, albedo_image=image, colour_attribute=attr, notes=notes)
         alpha = _input(node, "Alpha")
         src = linked_socket(alpha)
-        if src is not None and src[0].type == "TEX_IMAGE" and src[1].name == "Alpha":
-            s.opacity_image = image_use(src[0], notes)
+        mask = _alpha_image(src) or _alpha_mask_image(src)
+        if mask is not None:
+            s.opacity_image = image_use(mask, notes)
         elif src is not None:
             notes.append(f"the alpha of '{node.name}' comes from a {src[0].type.lower()} node: its value is used")
             s.opacity = _const(alpha, 1.0)
