@@ -295,8 +295,21 @@ def _alpha_mask_image(src):
     if math.operation == "SUBTRACT" and not math.inputs[0].is_linked and math.inputs[0].default_value == 1.0:
         inner = linked_socket(math.inputs[1])
         if inner is not None and inner[0].type == "MATH" and inner[0].operation == "LESS_THAN":
-            return _alpha_image(linked_socket(inner[0].inputs[0]))
+            return _alpha_image(_alpha_times_attribute(linked_socket(inner[0].inputs[0])))
     return None
+
+
+def _alpha_times_attribute(src):
+    """The image alpha in image alpha × Color Attribute alpha (the importer's alpha with COLOR_0),
+    whose attribute part the bake leaves out; `src` itself otherwise."""
+    if src is None or src[0].type != "MATH" or src[0].operation != "MULTIPLY":
+        return src
+    inputs = [linked_socket(sock) for sock in list(src[0].inputs)[:2]]
+    images = [i for i in inputs if _alpha_image(i) is not None]
+    others = [i for i in inputs if _alpha_image(i) is None]
+    if len(images) == 1 and others[0] is not None and others[0][0].type in ("VERTEX_COLOR", "ATTRIBUTE"):
+        return images[0]
+    return src
 
 
 def _shader(node, notes) -> Surface:
