@@ -55,7 +55,7 @@ def child(photons: int, warm_up: bool) -> dict:
     for event in job.job.events():
         if isinstance(event, job_mod.Phase) and event.phase == "trace" and "to_trace" not in out:
             out["to_trace"] = time.perf_counter() - t0
-        if isinstance(event, job_mod.Progress) and event.phase == "trace" and "first_batch" not in out:
+        if isinstance(event, job_mod.Status) and event.phase == "trace" and "first_batch" not in out:
             out["first_batch"] = time.perf_counter() - t0
         job.handle([event])
     out["bake"] = time.perf_counter() - t0

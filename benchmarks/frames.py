@@ -22,6 +22,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import scenes  # noqa: E402  (puts the repository root on sys.path)
 
+from detp_bake import options  # noqa: E402
 from detp_bake.run import bake as bake_mod  # noqa: E402
 from detp_bake.estimators import EstimatorSettings, FrameState  # noqa: E402
 from detp_bake.run.frames import find_motion, lights_signature, object_signatures, parse_frames  # noqa: E402
@@ -78,7 +79,7 @@ def main(argv=None):
     p.add_argument("--photons", type=int, default=500_000)
     p.add_argument("--resolution", type=int, default=64)
     p.add_argument("--radius-texels", type=float, nargs="+", default=[1.5, 4.0])
-    p.add_argument("--direct", default="photons", choices=bake_mod.DIRECT_MODES,
+    p.add_argument("--direct", default="photons", choices=options.DIRECT_MODES,
                    help="photons: the paper's mode, the estimators see every segment (default)")
     p.add_argument("--threads", type=int, default=0)
     p.add_argument("--no-sphere-cache", action="store_true", help="leave out sphere_cache (slow at large sizes)")

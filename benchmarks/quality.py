@@ -337,8 +337,8 @@ def sweep_scene(label_, cfg, cache, log):
     ref, halves, _ = reference(bpy, blender, label_, names, res, cfg["ref_spp"], cache, log)
     base = BakeSettings(estimator=SWEPT)
     if base.estimator_settings.radius_texels is None:  # the bake picks the radius by direct mode
-        from detp_bake import estimators
-        wide = getattr(estimators, "RADIUS_TEXELS_INDIRECT" if base.direct == "sampled" else "RADIUS_TEXELS_ALL")
+        from detp_bake import options
+        wide = getattr(options, "RADIUS_TEXELS_INDIRECT" if base.direct == "sampled" else "RADIUS_TEXELS_ALL")
         base = replace(base, estimator_settings=replace(base.estimator_settings, radius_texels=wide))
     warm = compute(scene, ours_settings(cfg, base.estimator, photons=2000))
     masks = warm.centre_masks

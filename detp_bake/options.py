@@ -114,9 +114,18 @@ class Option:
         return f"{auto}between {num(self.minimum)} and {num(self.maximum)}"
 
 
-def _estimators():
-    from . import estimators  # the registry imports this module for its defaults
-    return tuple((n, estimators.get(n).label, estimators.get(n).description) for n in estimators.names())
+# The estimators (name, label, help), in the order the panel and the help list them; each registers
+# under its name in estimators/ (which takes its label and help from here, and checks it is listed).
+ESTIMATORS = (
+    ("texel_histogram", "Texel Histogram",
+     "Each photon's flux into the texel it lands in: no blur, white noise (for OIDN)"),
+    ("disc_index", "DETP: Disc Index", "Tangent-disc density estimation with the discs indexed in a BVH (fastest)"),
+    ("sphere_cache", "DETP: Sphere Cache", "Tangent-disc density estimation through Lastra's sphere cache"),
+    ("hybrid", "DETP: Hybrid", "For frame ranges: the static objects' discs indexed once for all frames, the moving "
+     "objects' texels by the sphere cache (or a disc index) every frame"),
+    ("detp", "DETP: Brute Force", "Every segment against every disc: slow, the reference the others match"),
+    ("photon_map", "Photon Map", "Jensen's k-nearest-neighbour photon map: noisy, darkens edges"),
+)
 
 
 # Fields whose automatic value the core holds as None.
@@ -124,7 +133,7 @@ OPTIONAL = ("bounces", "radius_texels", "radius")
 
 OPTIONS = (
     Option("estimator", str, "texel_histogram", "Estimator", "Density estimator that turns photons into irradiance",
-           choices=_estimators),
+           choices=ESTIMATORS),
     Option("photons", int, 0, "Photons", "Photons traced from the lights: more means less noise; 0: automatic, "
            f"{PHOTONS_PER_TEXEL} per lightmap texel to bake ({AUTO_PHOTONS[0]:,} to {AUTO_PHOTONS[1]:,}); with a noise "
            f"target or a time limit the most to trace ({MAX_PHOTONS:,} when automatic)",
@@ -166,7 +175,7 @@ OPTIONS = (
     Option("atlas_padding", int, 2, "Atlas Padding", "Empty texels between charts in an atlas (at least 2: no "
            "texel is shared under bilinear filtering)", minimum=1, maximum=64, metavar="TEXELS", lightmaps="atlas"),
     Option("atlas_charts", str, "layout", "Atlas Charts", "What is packed into the atlases",
-           choices=(("layout", "Object Layouts", "Each object's lightmap UV layer as it is (made by Lightmap Pack "
+           choices=(("layout", "Object Layouts", "Each object's lightmap UV layer as it is (made with xatlas charts "
                      "where it has none), as one block, scaled to the density and placed"),
                     ("islands", "Islands", "The islands of each object's lightmap UV layer, each scaled to the "
                      "density and placed on its own"),

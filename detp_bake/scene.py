@@ -7,15 +7,11 @@ geometry is in world space, metres; colours are linear RGB; powers are watts as 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Optional, Union
+from typing import Optional, Union
 
 import numpy as np
 
 from .errors import BakeError
-
-if TYPE_CHECKING:
-    from .transport.environment import EnvironmentMap
-    from .transport.textures import Textures
 
 
 @dataclass
@@ -150,9 +146,9 @@ class Scene:
     # Textures (textures.py): albedo[t] × the RGB of albedo_texture[t] is a triangle's albedo where
     # that index is ≥ 0; opacity[t] × the alpha of opacity_texture[t] how much light it stops
     # (1: opaque). tex_uvs (T, 3, 2) are the UVs both textures are read at. None: untextured, opaque.
-    textures: Optional["Textures"] = None
+    textures: Optional[object] = None  # transport.textures.Textures: built from the scene, so not imported here
     # An HDRI world (environment.py); when set it replaces `world`.
-    world_map: Optional["EnvironmentMap"] = None
+    world_map: Optional[object] = None  # transport.environment.EnvironmentMap (likewise)
     tex_uvs: Optional[np.ndarray] = None
     albedo_texture: Optional[np.ndarray] = None
     opacity: Optional[np.ndarray] = None

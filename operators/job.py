@@ -84,13 +84,13 @@ class BlenderJob:
     def handle(self, events) -> bool:
         """Take in events on the main thread; True once the terminal one has come."""
         for event in events:
-            if isinstance(event, job_mod.Progress):
+            if isinstance(event, job_mod.Status):
                 self.progress = event
             elif isinstance(event, job_mod.Preview):
                 self.snapshot = event
                 if self.preview is not None and not self.job.cancelling:
                     self.preview.update(event.images)
-            elif isinstance(event, job_mod.Warning):
+            elif isinstance(event, job_mod.Notice):
                 self.warnings.append(event.message)
             elif isinstance(event, job_mod.TERMINAL):
                 self.outcome = event

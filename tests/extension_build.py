@@ -148,20 +148,29 @@ def blender_ext_script(bpy_version_dir: Path) -> Path:
     return Path(bpy_version_dir) / "scripts" / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
 
 
-_SKIP_AT_ROOT = {".git", ".cache", "build", "dist", "wheels", ".pytest_cache"}
+# What the extension is: the add-on's own tracked files, nothing else. A checkout where the suite ran
+# also holds viewer/node_modules, build output and caches; none of it may reach a user's zip.
+SHIPPED = ("__init__.py", "blender_manifest.toml", "README.md", "detp_bake", "operators", "ui")
+
+
+def shipped_files() -> list[str]:
+    """The repository's tracked files under SHIPPED (git ls-files): what every zip is built from."""
+    proc = subprocess.run(["git", "-C", str(ROOT), "ls-files", "-z", "--", *SHIPPED],
+                          capture_output=True, text=True, check=True)
+    files = [f for f in proc.stdout.split("\0") if f]
+    if "__init__.py" not in files or "blender_manifest.toml" not in files:
+        raise SystemExit(f"git ls-files in {ROOT} lists no extension: build from a git checkout")
+    return files
 
 
 def stage_source(dst: Path, wheels: list[Path], platform: str, line: str | None = None) -> Path:
-    """A copy of the extension's source whose manifest lists only `wheels` and `platform`, with those
-    wheels in place: `blender_ext.py build --split-platforms` on it builds just that platform's zip.
+    """A copy of the extension's source (shipped_files) whose manifest lists only `wheels` and `platform`,
+    with those wheels in place: `blender_ext.py build` on it builds just that platform's zip.
     `line`: the manifest also names the Blender versions of that line (LINE_VERSIONS)."""
-    def ignore(directory, names):
-        skip = {n for n in names if n == "__pycache__"}
-        if Path(directory).resolve() == ROOT:
-            skip |= {n for n in names if n in _SKIP_AT_ROOT or n.startswith(".venv")}
-        return skip
-
-    shutil.copytree(ROOT, dst, ignore=ignore)
+    for name in shipped_files():
+        if (ROOT / name).is_file():  # a tracked file deleted in the work tree is not shipped
+            (dst / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, dst / name)
     (dst / "wheels").mkdir()
     for w in wheels:
         shutil.copy2(w, dst / "wheels" / w.name)
@@ -179,21 +188,31 @@ def stage_source(dst: Path, wheels: list[Path], platform: str, line: str | None 
     return dst
 
 
-def build_zips(dist: Path, blender_ext: Path, cache: Path) -> list[tuple[Path, int]]:
-    """One zip per Blender line and platform, each with that line's wheels only:
-    dist/<id>-<version>-blender<line>-<platform>.zip. Returns [(zip, bytes)]."""
-    import tempfile
+def zip_name(line: str, platform: str) -> str:
     info = manifest()
+    return f"{info['id']}-{info['version']}-blender{line}-{platform}.zip"
+
+
+def build_zip(dist: Path, blender_ext: Path, cache: Path, line: str, platform: str) -> Path:
+    """The zip users get for one Blender line and platform, with that line's wheels only:
+    dist/<id>-<version>-blender<line>-<platform>.zip (`make extension` and tests/test_extension.py)."""
+    import tempfile
+    wheels = download_cached(cache, LINES[line], platform)
     dist.mkdir(parents=True, exist_ok=True)
+    out = dist / zip_name(line, platform)
+    with tempfile.TemporaryDirectory() as tmp:
+        src = stage_source(Path(tmp) / "src", wheels, platform, line)
+        subprocess.run([sys.executable, str(blender_ext), "build", "--source-dir", str(src),
+                        "--output-filepath", str(out)], check=True, stdout=subprocess.DEVNULL)
+    return out
+
+
+def build_zips(dist: Path, blender_ext: Path, cache: Path) -> list[tuple[Path, int]]:
+    """Every line's and platform's zip (build_zip). Returns [(zip, bytes)]."""
     built = []
-    for line, python in LINES.items():
-        for platform in info["platforms"]:
-            wheels = download_cached(cache, python, platform)
-            with tempfile.TemporaryDirectory() as tmp:
-                src = stage_source(Path(tmp) / "src", wheels, platform, line)
-                out = dist / f"{info['id']}-{info['version']}-blender{line}-{platform}.zip"
-                subprocess.run([sys.executable, str(blender_ext), "build", "--source-dir", str(src),
-                                "--output-filepath", str(out)], check=True, stdout=subprocess.DEVNULL)
+    for line in LINES:
+        for platform in manifest()["platforms"]:
+            out = build_zip(dist, blender_ext, cache, line, platform)
             built.append((out, out.stat().st_size))
             print(f"{out.name}: {out.stat().st_size / 1e6:.0f} MB", flush=True)
     return built

@@ -32,6 +32,11 @@ def registered(bpy):
     }
 
 
+def files_under(root):
+    """Every file below `root`, relative to it."""
+    return sorted(os.path.relpath(os.path.join(d, f), root) for d, _, fs in os.walk(root) for f in fs)
+
+
 def main(site_dir, zip_path, scene_path, out_dir, result_path):
     sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != os.path.dirname(os.path.abspath(__file__))]
     site.addsitedir(site_dir)
@@ -47,8 +52,10 @@ def main(site_dir, zip_path, scene_path, out_dir, result_path):
         with open(result_path, "w") as fh:
             json.dump(r, fh, indent=1)
 
+    user_root = os.environ["BLENDER_USER_RESOURCES"]
     try:
         import bpy
+        before = set(files_under(user_root))
         r["blender"] = bpy.app.version_string
         repos = [repo.module for repo in bpy.context.preferences.extensions.repos]
         repo = bpy.context.preferences.extensions.repos[repos.index(REPO)]
@@ -83,6 +90,8 @@ def main(site_dir, zip_path, scene_path, out_dir, result_path):
         r["after_uninstall"] = registered(bpy)
         lap("disable_uninstall")
         r["left_in_repo"] = os.path.exists(os.path.join(repo.directory, PKG))
+        r["user_files_added"] = sorted(set(files_under(user_root)) - before)
+        r["extension_user_dir"] = os.path.relpath(bpy.utils.extension_path_user(MODULE), user_root)
         r["left_wheels"] = sorted(n for sp in site_packages if os.path.isdir(sp) for n in os.listdir(sp))
     except BaseException:
         r["error"] = traceback.format_exc()

@@ -113,10 +113,13 @@ def test_levels_benchmark(tmp_path):
     text = _run("levels.py", "--quick", "--out", str(tmp_path))
     data = json.loads((tmp_path / "levels.json").read_text())
     row = data["phases"][0]
-    assert data["faces"] > 30_000 and row["size"] == 64 and row["photons"] == 1_000_000
+    # What it measured, not what it was given: the texels baked, phases that add up to no more than the
+    # bake's wall time, OIDN timed on its own.
+    assert data["faces"] > 30_000 and row["texels"] > 0
     assert {"rasterise", "direct", "trace", "estimate", "denoise"} <= set(row["seconds"]) and row["oidn_alone"] > 0
+    assert 0 < sum(row["seconds"][k] for k in ("rasterise", "direct", "trace", "estimate", "denoise")) <= row["wall"]
     assert row["charts"]["count"] > 500 and row["warned"]  # Smart UV Project at 64²: fragments, and said so
     methods = [r["method"] for r in data["race"]["rows"]]
     assert methods[0].startswith("ours") and methods[-1] == "Cycles 8 spp + OIDN"
-    assert all(0 < r["error"] < 2 for r in data["race"]["rows"])
-    assert "| 64² |" in text and "Race at 32²" in text
+    assert all(0 < r["error"] < 2 and r["seconds"] > 0 for r in data["race"]["rows"])
+    assert "Race at 32²" in text

@@ -223,7 +223,7 @@ def test_missing_pyoidn_is_a_bake_error_naming_the_package(monkeypatch):
 
 
 def test_sharp_lights_are_not_denoised():
-    """Point and sun light (bake._finish keeps their part as the shadow rays give it): with nothing
+    """Point and sun light (finishing.Finishing keeps their part as the shadow rays give it): with nothing
     else to denoise (no bounce, no sky), the denoised lightmap is the raw one (to float32 rounding);
     add a sky and only the sky's part moves."""
     from detp_bake.run.bake import BakeSettings, compute
@@ -244,9 +244,9 @@ def test_sharp_lights_are_not_denoised():
 
 
 def test_big_lightmaps_denoise_soft_and_indirect_light_in_one_run(monkeypatch):
-    """From bake.ONE_PASS_FROM pixels the sky's light and the indirect light go through OIDN together:
+    """From finishing.ONE_PASS_FROM pixels the sky's light and the indirect light go through OIDN together:
     one run instead of two (the sun's light is kept, not denoised); the energy is the same."""
-    from detp_bake.run import bake as bake_mod
+    from detp_bake.run import finishing
     from detp_bake.run.bake import BakeSettings, compute
     from detp_bake.scene import SunLight
     from synthetic import box, grid, make_scene
@@ -258,7 +258,7 @@ def test_big_lightmaps_denoise_soft_and_indirect_light_in_one_run(monkeypatch):
     monkeypatch.setattr(denoise, "_run_filter", lambda *a, **k: runs.append(a[0].shape) or real(*a, **k))
     means = {}
     for one_pass in (10 ** 9, 32 * 32):
-        monkeypatch.setattr(bake_mod, "ONE_PASS_FROM", one_pass)
+        monkeypatch.setattr(finishing, "ONE_PASS_FROM", one_pass)
         runs.clear()
         r = compute(make_scene(parts, [sun], world=(0.3, 0.4, 0.5), resolution=32, bounces=2),
                     BakeSettings(photons=200_000))

@@ -67,15 +67,12 @@ def test_manifest_wheels_are_the_pinned_runtime_wheels_for_every_line_and_platfo
 
 @pytest.fixture(scope="module")
 def built_zip(bpy, tmp_path_factory):
+    """The very zip `make extension` gives users for this line and machine (extension_build.build_zip)."""
     if HOST is None:
         pytest.skip(f"the extension ships no zip for this machine ({sys.platform}, {platform.machine()})")
-    wheels = eb.download_cached(WHEEL_CACHE, PY, HOST)
-    tmp = tmp_path_factory.mktemp("extension")
-    src = eb.stage_source(tmp / "src", wheels, HOST, LINE)
-    proc = _run(_blender_ext(bpy), "build", "--split-platforms", "--source-dir", src, "--output-dir", tmp)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    path = tmp / f"{eb.manifest()['id']}-{eb.manifest()['version']}-{HOST.replace('-', '_')}.zip"
-    assert path.is_file(), proc.stdout
+    dist = tmp_path_factory.mktemp("dist")
+    path = eb.build_zip(dist, _blender_ext(bpy), WHEEL_CACHE, LINE, HOST)
+    assert path == dist / f"{eb.manifest()['id']}-{eb.manifest()['version']}-blender{LINE}-{HOST}.zip"
     return path
 
 
@@ -85,16 +82,33 @@ def test_zip_holds_the_add_on_and_this_pythons_wheels_only(bpy, built_zip):
             "ui/properties.py"} <= set(names)
     assert sorted(n for n in names if n.startswith("wheels/")) == \
         sorted(f"wheels/{Path(w).name}" for w in eb.manifest_wheels(PY, HOST))
+    # The add-on's tracked files and the wheels, nothing else: no node_modules, build output, caches or test data.
+    tracked = set(eb.shipped_files())
+    assert {n for n in names if not n.startswith("wheels/") and not n.endswith("/")} == tracked
     for name in names:
-        top = name.split("/")[0]
-        assert top not in {"tests", "benchmarks", "sample_scenes", "requirements", "Makefile", "build", "dist"}, name
-        assert "__pycache__" not in name and not name.endswith((".pyc", ".nbi", ".nbc", ".blend")), name
+        assert name.split("/")[0] in set(eb.SHIPPED) | {"wheels"}, name
+        assert "node_modules" not in name and "__pycache__" not in name, name
+        assert not name.endswith((".pyc", ".nbi", ".nbc", ".blend", ".glb", ".exr")), name
     proc = _run(_blender_ext(bpy), "validate", built_zip)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     # One Blender line's zip: it says which Blender versions its wheels serve.
     manifest = tomllib.loads(zipfile.ZipFile(built_zip).read("blender_manifest.toml").decode())
     low, high = eb.LINE_VERSIONS[LINE]
     assert manifest["blender_version_min"] == low and manifest.get("blender_version_max") == high
+
+
+def test_a_checkouts_build_output_stays_out_of_the_zip(tmp_path, monkeypatch):
+    """Files a checkout gathers (viewer/node_modules, a stray file in the core) are not tracked: not staged."""
+    stray = ROOT / "detp_bake" / "_stray_build_output.tmp"
+    stray.write_text("not tracked")
+    try:
+        src = eb.stage_source(tmp_path / "src", [], "linux-x64", "4.5")
+    finally:
+        stray.unlink()
+    staged = {str(p.relative_to(src)) for p in src.rglob("*") if p.is_file()}
+    assert "detp_bake/_stray_build_output.tmp" not in staged
+    assert not any(s.startswith(("viewer/", "tests/", "docs/", "sample_scenes/")) for s in staged)
+    assert staged - {"blender_manifest.toml"} == {f for f in eb.shipped_files() if f != "blender_manifest.toml"}
 
 
 def _blender_like_site(bpy, dst: Path) -> Path:
@@ -144,5 +158,10 @@ def test_install_bake_disable_uninstall(bpy, built_zip, tmp_path):
         assert state == {"addon_enabled": False, "ops": [], "types": [], "properties": []}, state
     assert r["uninstall"] == ["FINISHED"]
     assert not r["left_in_repo"]
+    # Nothing left outside the extension's own user folder (its compiled-kernel cache) once it is removed,
+    # but Blender's own extension cache.
+    left = [f for f in r["user_files_added"]
+            if not f.startswith((r["extension_user_dir"] + os.sep, os.path.join("extensions", ".cache") + os.sep))]
+    assert not left, (r["extension_user_dir"], left)
     assert not [n for n in r["left_wheels"] if n.split("-")[0].split(".")[0].lower() in
                 {p.lower() for p in eb.RUNTIME}], r["left_wheels"]

@@ -196,7 +196,7 @@ def test_a_range_as_a_job_has_one_progress_bar_whose_exports_run_on_the_callers_
         events += job.poll()
         time.sleep(0.01)
     events += job.poll()
-    progress = [e for e in events if isinstance(e, job_mod.Progress)]
+    progress = [e for e in events if isinstance(e, job_mod.Status)]
     assert isinstance(events[-1], job_mod.Result) and events[-1].frames.frames == [1, 2, 3]
     # Frame k of 3 moves the bar within its third of the range, and the last ends it.
     for e in progress:

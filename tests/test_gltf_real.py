@@ -130,3 +130,30 @@ def test_a_size_flag_that_does_nothing_is_refused_before_any_work(tmp_path, caps
     code = main(["bake", str(tmp_path / "missing.blend"), "--out", str(tmp_path / "out"), *flags])
     assert code == 2 and message in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.blender
+def test_faces_copied_by_a_modifier_are_named_before_the_bake_and_in_the_overlap_warning(bpy, scene):
+    """An Array modifier's copies keep the mesh's UVs, so no packing can part them: said before the
+    bake, and the overlap warning names the object, not the atlas."""
+    from detp_bake import blender
+    from detp_bake.estimators import EstimatorSettings
+    from detp_bake.lightmap import texels
+    from detp_bake.run.bake import layout_warnings
+    from detp_bake.run.settings import BakeSettings
+    bpy.ops.wm.open_mainfile(filepath=str(scene))
+    array = bpy.data.objects["CrateA"].modifiers.new("Row", "ARRAY")
+    array.relative_offset_displace = (0.0, 1.5, 0.0)
+    said = []
+    exported = blender.export_scene(bpy.context.scene, None, BAKED, None, 0, log=said.append,
+                                    atlas=BakeSettings(lightmaps="atlas", texel_density=6.0, atlas_size=256))
+    assert [m for m in said if "copy faces" in m] == [
+        "atlas: the modifiers of 'CrateA' (Array) copy faces with their lightmap UVs, so the copies share texels "
+        "(one light for all): apply the modifiers (Object › Apply) to give each copy texels of its own"]
+    (lm,) = texels.rasterise(exported).lightmaps
+    share = lm.placement["CrateA"]["overlap"]  # texel centres under two faces (edge texels are under one)
+    assert share > 0.5
+    assert all(p["overlap"] == 0.0 for n, p in lm.placement.items() if n != "CrateA")
+    (warning,) = [w for w in layout_warnings(texels.rasterise(exported), EstimatorSettings()) if "two or more" in w]
+    assert warning.startswith(f"objects 'CrateA' ({100 * share:.0f} %) in atlas 'atlas_0': their lightmap texels "
+                              "lie under two or more faces")

@@ -37,7 +37,7 @@ def test_a_bake_tells_started_phases_progress_and_one_result(tmp_path):
     assert "Error" not in kinds and "Cancelled" not in kinds and "Preview" not in kinds
     phases = [e.phase for e in events if isinstance(e, job_mod.Phase)]
     assert phases == ["direct", "prepare", "trace", "estimate", "write"]
-    progress = [e for e in events if isinstance(e, job_mod.Progress)]
+    progress = [e for e in events if isinstance(e, job_mod.Status)]
     overall = [p.overall for p in progress]
     assert overall == sorted(overall) and overall[-1] == 1.0  # the bar only moves forward
     traced = [p for p in progress if p.phase == "trace"]
@@ -166,16 +166,20 @@ def test_the_photon_map_previews_its_gather_so_far_and_ends_as_a_bake_without_pr
     assert [e.photons for e in events if isinstance(e, job_mod.Preview)] == [BATCH]
 
 
-def test_a_job_started_during_the_warm_up_waits_for_it_and_then_runs(tmp_path):
+def test_a_job_started_during_the_warm_up_waits_for_it_and_then_runs(tmp_path, monkeypatch):
     """The warm-up (every kernel compiled on a tiny scene) holds the lock without refusing jobs:
     a bake clicked meanwhile starts once it is done; a second warm-up does not start."""
     from detp_bake.run import warmup
+    monkeypatch.setattr(warmup, "seconds", None)  # set when a warm-up's work is done, before it lets go
     assert warmup.start() is not None
     try:
         assert job_mod.warming() and job_mod.busy_message() is None  # the buttons stay live
         assert warmup.start() is None
-        result = job_mod.Job(_scene(), _settings(), tmp_path).run()
+        assert warmup.seconds is None, "the premise: the job is started while the warm-up still works"
+        job = job_mod.Job(_scene(), _settings(), tmp_path).start()
+        assert warmup.seconds is not None and warmup.seconds > 0.0  # start waited for the warm-up's end
+        result = job.run()
     finally:
         warmup.wait()
-    assert not warmup.running() and warmup.seconds > 0.0
+    assert not warmup.running()
     assert isinstance(result, job_mod.Result) and job_mod.running() is None

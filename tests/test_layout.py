@@ -28,11 +28,17 @@ def _folder(module: str) -> str:
     return parts[1] if len(parts) > 1 and (CORE / parts[1]).is_dir() else "base"
 
 
-def _top_level_imports(module, package, tree):
+def _top_level_imports(module, package, tree, anywhere=False):
     """(target module, imported names, node) of each import that runs when the module loads:
-    the module's body, not functions, not `if TYPE_CHECKING:` blocks."""
-    for node in tree.body:
-        if isinstance(node, ast.ImportFrom) and node.level:
+    the module's body, not functions, not `if TYPE_CHECKING:` blocks (`anywhere`: every import the
+    module holds, in functions and type-checking blocks too; absolute ones as well)."""
+    for node in (ast.walk(tree) if anywhere else tree.body):
+        if anywhere and isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            yield node.module, [a.name for a in node.names], node
+        elif anywhere and isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, [], node
+        elif isinstance(node, ast.ImportFrom) and node.level:
             base = module.split(".") if package else module.split(".")[:-1]
             if node.level > 1:
                 base = base[:len(base) - node.level + 1]
@@ -40,19 +46,21 @@ def _top_level_imports(module, package, tree):
             yield target, [a.name for a in node.names], node
 
 
-def _graph():
+def _graph(anywhere=False):
     graph, modules = {}, {m: (p, path) for m, p, path in _modules()}
     for module, (package, path) in modules.items():
         edges = set()
-        for target, names, _ in _top_level_imports(module, package, ast.parse(path.read_text())):
+        for target, names, _ in _top_level_imports(module, package, ast.parse(path.read_text()), anywhere):
             subs = [f"{target}.{n}" for n in names if f"{target}.{n}" in modules]
             edges.update(subs or ([target] if target in modules else []))
         graph[module] = edges - {module}
     return graph
 
 
-def test_no_module_imports_itself_back_when_it_loads():
-    graph = _graph()
+def test_no_module_imports_itself_back_not_even_lazily():
+    """No circle, counting imports inside functions and type-checking blocks: a lazy import that closes
+    a circle is a layering the code hides, not one it has."""
+    graph = _graph(anywhere=True)
     seen, stack, cycles = {}, [], []
 
     def visit(m):
@@ -101,3 +109,39 @@ def test_modules_keep_their_own_secrets_and_functions_short(check):
                 if length > LONGEST and not compiled:
                     found.append(f"{module}.{node.name}: {length} lines")
     assert not found, found
+
+
+def test_the_estimators_declared_in_options_are_the_registered_ones():
+    """options.ESTIMATORS names them for the panel and the help; the registry holds the code: the same
+    names in the same order, each with its label (the registry knows nothing of the options' list but it)."""
+    from detp_bake import estimators, options
+    assert estimators.names() == [name for name, _, _ in options.ESTIMATORS]
+    assert [(n, estimators.get(n).label) for n in estimators.names()] == \
+        [(name, label) for name, label, _ in options.ESTIMATORS]
+
+
+def test_the_readmes_memory_figures_are_the_estimates():
+    """README's per-texel bytes are the memory estimate's own constants (run/memory.py and each
+    estimator's bytes_per_texel), so the page cannot keep a figure the code has dropped."""
+    import re
+    from detp_bake import estimators
+    from detp_bake.run import memory
+    text = " ".join((CORE.parent / "README.md").read_text().split())
+    said = re.search(r"texels \(about (\d+) bytes each, plus the estimator's own: (.*?)\), lightmap images "
+                     r"\(about (\d+) bytes a pixel", text)
+    assert said, "README: the memory estimate's sentence is gone or reworded"
+    assert int(said.group(1)) == memory.TEXEL_BYTES and int(said.group(3)) == memory.PIXEL_BYTES
+    found = re.findall(r"(\d+) for (?:the )?([\w ]+?)(?:,|$)", said.group(2))
+    assert len(found) == 4, found
+    for figure, name in found:
+        key = {"texel histogram": "texel_histogram", "photon map": "photon_map"}.get(name, name)
+        assert int(figure) == estimators.get(key).bytes_per_texel, (name, figure)
+
+
+def test_no_file_over_600_lines():
+    """One module per idea: a file past 600 lines holds more than one (the extension's own code)."""
+    root = CORE.parent
+    files = [p for folder in ("detp_bake", "operators", "ui") for p in (root / folder).rglob("*.py")]
+    long = {str(p.relative_to(root)): n for p in files + [root / "__init__.py"]
+            if (n := len(p.read_text().splitlines())) > 600}
+    assert not long, long

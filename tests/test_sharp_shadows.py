@@ -1,4 +1,4 @@
-"""Sharp direct light stays sharp through the denoiser (bake._finish: the part of point, spot and sun
+"""Sharp direct light stays sharp through the denoiser (finishing.Finishing: the part of point, spot and sun
 lights is kept as the shadow rays give it; only area lights, emissive meshes, the sky and the
 indirect light are denoised), against Cycles' own bake in the same process.
 

@@ -42,6 +42,24 @@ def _single_users(objects, log) -> None:
             "object: each now has a mesh of its own (its texels in the atlas are its own)")
 
 
+# Modifiers whose copies of the faces keep the mesh's UVs: the copies share the object's texels.
+COPYING = {"ARRAY": "Array", "MIRROR": "Mirror", "SOLIDIFY": "Solidify", "SCREW": "Screw"}
+
+
+def _copied(objects, log) -> None:
+    """Say, before the bake, which objects' modifiers copy faces onto the same atlas texels: a UV
+    layer lives on the mesh, so no packing can give the copies texels of their own."""
+    found = []
+    for obj in objects:
+        kinds = list(dict.fromkeys(COPYING[m.type] for m in obj.modifiers if m.type in COPYING and m.show_render))
+        if kinds:
+            found.append(f"'{obj.name}' ({', '.join(kinds)})")
+    if found:
+        log(f"atlas: the modifiers of {', '.join(found[:6])}{' …' if len(found) > 6 else ''} copy faces with their "
+            "lightmap UVs, so the copies share texels (one light for all): apply the modifiers (Object › Apply) to "
+            "give each copy texels of its own")
+
+
 def _triangles(obj, layer: str):
     """(loop indices (T, 3), world positions (T, 3, 3), the layer's UVs (T, 3, 2)) of obj's mesh."""
     me = obj.data
@@ -102,6 +120,7 @@ def pack(bl_scene, objects, layers: dict, settings, log, created=None) -> dict:
     """Pack `objects` (their islands in `layers` {name: UV layer}) into atlases, each one's UVs
     written into ATLAS_UV; returns {object name: (atlas name, its side in texels)}."""
     _single_users(objects, log)
+    _copied(objects, log)
     digest = _hash(objects, layers, settings)
     state = json.loads(bl_scene.get(STATE, "{}"))
     fresh = state.get("hash") == digest and all(ATLAS_UV in o.data.uv_layers for o in objects) \

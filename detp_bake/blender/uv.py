@@ -86,21 +86,27 @@ def _welded(obj, layer: str):
     return tri_l.reshape(-1, 3), np.ascontiguousarray(co[loop_v[first]]), index, np.ascontiguousarray(uv[first])
 
 
-def _pack(vertices, index, uv, density: float):
-    """xatlas's packing of the charts at `density` texels per unit, into one atlas that grows to
-    fit (so never into several, whose UVs would overlap): (its side, indices, corner UVs in 0..1 of
-    the side, utilisation)."""
+def _pack(vertices, index, uv, density: float, resolution: int = 0):
+    """xatlas's packing of the charts at `density` texels per unit, or scaled by xatlas for a
+    `resolution`² lightmap, into one atlas: where xatlas would spread them over several (whose UVs
+    would overlap in one layer) they are packed again at its scale into one that grows to fit.
+    Returns (the atlas's side, indices, corner UVs in 0..1 of the side, utilisation)."""
     import xatlas
 
-    atlas = xatlas.Atlas()
-    atlas.add_mesh(vertices, index, None, uv)
-    charts = xatlas.ChartOptions()
-    charts.use_input_mesh_uvs = True
-    pack = xatlas.PackOptions()
-    pack.texels_per_unit = float(density)
-    pack.padding = PADDING
-    pack.bilinear = True
-    atlas.generate(charts, pack)
+    for attempt in range(2):
+        atlas = xatlas.Atlas()
+        atlas.add_mesh(vertices, index, None, uv)
+        charts = xatlas.ChartOptions()
+        charts.use_input_mesh_uvs = True
+        pack = xatlas.PackOptions()
+        pack.texels_per_unit = float(density)
+        pack.resolution = int(resolution)
+        pack.padding = PADDING
+        pack.bilinear = True
+        atlas.generate(charts, pack)
+        if atlas.atlas_count == 1:
+            break
+        density, resolution = float(atlas.texels_per_unit), 0
     _, indices, packed = atlas[0]
     side = max(int(atlas.width), int(atlas.height), 1)
     packed = np.asarray(packed, np.float32) * np.array([atlas.width / side, atlas.height / side], np.float32)
@@ -110,27 +116,20 @@ def _pack(vertices, index, uv, density: float):
 def xatlas_unwrap(obj, layer: str, resolution: int = 0, density: float = 0.0) -> float:
     """Charts from Smart UV Project (whole polygons, so every face keeps consistent UVs), packed by
     xatlas with a PADDING-texel bilinear padding into `layer` (created or replaced; no other layer
-    changes): at `density` texels per metre (an atlas's objects), else filling a `resolution`²
+    changes): at `density` texels per metre (an atlas's objects), else for a `resolution`²
     lightmap. UVs in 0..1 of the layout's longer side. Returns xatlas's utilisation."""
     unwrap_into(obj, layer, lambda: bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0))
     if not len(obj.data.polygons):
         return 0.0
     tri_l, vertices, index, uv = _welded(obj, layer)
-    p = vertices[index.astype(np.int64)]
-    area = float(0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
-    target = int(resolution or 128)
-    scale = density if density > 0 else target * np.sqrt(0.5 / max(area, 1e-12))
-    for _ in range(4):  # at a resolution: smaller until the layout and its padding fit the lightmap
-        side, indices, packed, used = _pack(vertices, index, uv, scale)
-        if density > 0 or side <= target:
-            break
-        scale *= 0.97 * target / side
-    if density <= 0:
-        packed *= np.float32(side / max(side, target))  # in 0..1 of the lightmap, not of the layout
+    if density > 0:
+        _, indices, packed, used = _pack(vertices, index, uv, density)
+    else:
+        _, indices, packed, used = _pack(vertices, index, uv, 0.0, int(resolution or 128))
     out = np.zeros((len(obj.data.loops), 2), np.float32)
     out[tri_l] = packed[indices]
     obj.data.uv_layers[layer].uv.foreach_set("vector", out.reshape(-1))
-    return used * (side / max(side, target)) ** 2 if density <= 0 else used
+    return used
 
 
 def remove_uv_layers(bl_scene, created: Iterable) -> None:

@@ -64,7 +64,7 @@ def _bake_arguments(b, with_scene_path):
     b.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake (default: all visible meshes)")
     _option_arguments(b)
     b.add_argument("--uv-layer", default=None,
-                   help=f"lightmap UV layer (default '{options.UV_LAYER}', created with Lightmap Pack if missing)")
+                   help=f"lightmap UV layer (default '{options.UV_LAYER}', created with xatlas charts if missing)")
     b.add_argument("--out", required=True, help="output folder")
     b.add_argument("--format", default=",".join(bake_mod.BakeSettings.formats),
                    help=f"comma-separated: {','.join(images.WRITERS)} (default %(default)s)")
@@ -213,9 +213,9 @@ def _run_job(job: job_mod.Job, cancel=None, said=(), main: Optional[job_mod.Main
     def tell(event):  # on the worker thread: in order with what the worker itself prints
         if job.cancelling or (cancel is not None and cancel()):
             return
-        if isinstance(event, job_mod.Progress):
+        if isinstance(event, job_mod.Status):
             progress(event)
-        elif isinstance(event, job_mod.Warning) and event.message not in said:
+        elif isinstance(event, job_mod.Notice) and event.message not in said:
             _log(f"warning: {event.message}")
 
     job.listener = tell

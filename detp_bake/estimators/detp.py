@@ -12,7 +12,7 @@ import numba
 import numpy as np
 
 from ..errors import BakeError
-from . import Estimate, Estimator, register
+from .base import Estimate, Estimator, register
 from .discs import add_l1, crossing_weight, l1_sums, make_discs
 
 WORK_LIMIT = 4e10  # segment–disc tests: about a minute on two cores
@@ -48,8 +48,6 @@ class BruteForceDETP(Estimator):
     # Discs' radius and slab, sums (24) and crossing counts; clearance, rise, noise sums, the sums
     # in flight: measured, benchmarks/memory.py
     bytes_per_texel = 120
-    label = "DETP: Brute Force"
-    description = "Every segment against every disc: slow, the reference the others match"
     streaming = True
     discs = True
     directional = True

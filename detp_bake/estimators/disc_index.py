@@ -26,7 +26,8 @@ import time
 import numba
 import numpy as np
 
-from . import Estimate, Estimator, patches, register
+from .base import Estimate, Estimator, register
+from . import patches
 from ..bvh import AXIS, CONE, HI, LO, STACK_DEPTH, build
 from .discs import add_l1, crossing_weight, l1_sums, make_discs
 from ..morton import segment_order
@@ -192,8 +193,6 @@ class DiscIndex(Estimator):
     # noise sums (16), the sums in flight, what the build leaves: measured, benchmarks/memory.py
     # (200 until the sites' blend tables, 56 bytes a texel, were no longer made for every texel a site)
     bytes_per_texel = 155
-    label = "DETP: Disc Index"
-    description = "Tangent-disc density estimation with the discs indexed in a BVH (fastest)"
     streaming = True
     discs = True
     directional = True

@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
-from . import Context, Estimate, Estimator, EstimatorSettings, register
+from .base import Context, Estimate, Estimator, EstimatorSettings, register
 from .disc_index import DiscIndex
 from .discs import Discs, make_discs
 from ..morton import morton_order
@@ -102,9 +102,6 @@ def _boxes(discs: Discs) -> tuple[np.ndarray, np.ndarray]:
 @register
 class Hybrid(Estimator):
     name = "hybrid"
-    label = "DETP: Hybrid"
-    description = ("For frame ranges: the static objects' discs indexed once for all frames, the moving objects' "
-                   "texels by the sphere cache (or a disc index) every frame")
     streaming = True
     discs = True
     directional = True

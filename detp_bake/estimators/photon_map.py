@@ -15,7 +15,7 @@ from scipy.spatial import cKDTree
 
 from ..rays import RayCaster
 from ..lightmap.validity import LIFT
-from . import Estimate, Estimator, register
+from .base import Estimate, Estimator, register
 from ..bvh import discs_meet_triangles
 
 CHUNK = 8192  # texels per k-NN query, bounds the (chunk, k, 3) gather
@@ -54,8 +54,6 @@ class _Walls:
 class PhotonMap(Estimator):
     name = "photon_map"
     bytes_per_texel = 30  # its (N, 3) result (the hits are counted apart): benchmarks/memory.py
-    label = "Photon Map"
-    description = "Jensen's k-nearest-neighbour photon map: noisy, darkens edges"
     stores_hits = True
     slow_preview = True
     baseline = True

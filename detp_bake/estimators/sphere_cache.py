@@ -17,7 +17,7 @@ import time
 import numba
 import numpy as np
 
-from . import Estimate, Estimator, register
+from .base import Estimate, Estimator, register
 from .discs import add_l1, crossing_weight, l1_sums, make_discs
 from ..morton import morton_order
 
@@ -113,8 +113,6 @@ class SphereCache(Estimator):
     # Discs' radius and slab, their spheres, levels and Morton order, sums (24); clearance and rise,
     # noise sums, the sums in flight: measured, benchmarks/memory.py
     bytes_per_texel = 160
-    label = "DETP: Sphere Cache"
-    description = "Tangent-disc density estimation through Lastra's sphere cache"
     streaming = True
     discs = True
     directional = True

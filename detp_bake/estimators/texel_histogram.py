@@ -10,7 +10,7 @@ some πr² times as many segments and each must be found in an index. Its noise 
 1/√(photons landing on the texel), and independent from texel to texel. That white noise is what
 OIDN is trained to remove (docs/design.md, Denoising: noise correlated over a disc passes through it), so this
 estimator is meant to be denoised: it is the indirect part of a bake whose direct light comes from
-shadow rays, and the bake denoises the two parts apart (bake._finish), since OIDN smooths white
+shadow rays, and the bake denoises the two parts apart (finishing.Finishing), since OIDN smooths white
 noise over a smooth field far better than next to the sharp edges of direct light (L-shaped room,
 1M photons: 1.65 % against 2.24 % RMSE to Cycles). With `--direct photons` or without denoising it
 is the noisiest of the estimators.
@@ -25,7 +25,7 @@ import numpy as np
 from ..transport.textures import hit_uv, opacity_at, surfaces
 from ..lightmap.texels import lightmap_triangles
 from ..lightmap.validity import Cuts, on_side
-from . import Estimate, Estimator, register
+from .base import Estimate, Estimator, register
 
 # A landing's weight cos(shading normal) / cos(face normal) is capped: on a face tilted 30° from its
 # shading normal (a six-sided smooth cylinder) the cap binds only within 7° of grazing the face.
@@ -153,8 +153,6 @@ class TexelHistogram(Estimator):
     # The block sums and the bake's running sums (24 each), the noise sums (8), the pixel table (4 a pixel):
     # measured, benchmarks/memory.py
     bytes_per_texel = 60
-    label = "Texel Histogram"
-    description = "Each photon's flux into the texel it lands in: no blur, white noise (for OIDN)"
     streaming = True
     every_texel = True  # its estimate costs nothing per texel: no sites between which to blend
     texel_geometry_while_tracing = False  # landings find their texel from the scene's triangles

@@ -87,13 +87,14 @@ def chart_stats(uv: np.ndarray, positions: np.ndarray, res: int, pixel: np.ndarr
     return len(width), float(np.median(width)), float(_border(owner, res).sum()) / len(pixel)
 
 
-def member_stats(uv: np.ndarray, positions: np.ndarray, res: int, pixel: np.ndarray, texel_tri: np.ndarray,
-                 member: np.ndarray, count: int) -> list:
-    """chart_stats of each of `count` objects sharing an atlas, `member` the (T,) object of each
-    triangle: [(charts, median width, share of its texels on a border)]: which objects of an
-    atlas are fragmented, to name them."""
+def into_placement(placement: dict, objects, triangles, uv, positions, res: int, pixel, texel_tri, doubled) -> None:
+    """Each atlas object's own charts (chart_stats of its charts alone, border texels as the atlas
+    has them) and the share of its texels under two or more faces, into its `placement` entry
+    (texels.Lightmap.placement): the warnings name objects, not the atlas. `objects` the atlas's
+    BakeObjects, `triangles` the scene's triangles of `uv`, `doubled` per covered texel."""
     if len(uv) == 0 or len(pixel) == 0:
-        return [(0, 0.0, 0.0)] * count
+        return
+    member = np.searchsorted([o.first_triangle for o in objects], triangles, side="right") - 1
     chart, width = chart_widths(uv, positions, res)
     owner = np.full(res * res, -1, np.int64)
     owner[pixel] = chart[texel_tri]
@@ -101,13 +102,12 @@ def member_stats(uv: np.ndarray, positions: np.ndarray, res: int, pixel: np.ndar
     of_texel = member[texel_tri]
     of_chart = np.zeros(len(width), np.int64)
     of_chart[chart] = member
-    out = []
-    for k in range(count):
-        mine = of_chart == k
-        texels = of_texel == k
-        out.append((int(mine.sum()), float(np.median(width[mine])) if mine.any() else 0.0,
-                    float(on_border[texels].mean()) if texels.any() else 0.0))
-    return out
+    for k, obj in enumerate(objects):
+        mine, texels = of_chart == k, of_texel == k
+        placement[obj.name]["charts"] = {
+            "count": int(mine.sum()), "median_width": round(float(np.median(width[mine])), 2) if mine.any() else 0.0,
+            "border": round(float(on_border[texels].mean()), 4) if texels.any() else 0.0}
+        placement[obj.name]["overlap"] = round(float(doubled[texels].mean()), 4) if texels.any() else 0.0
 
 
 def fragmented(count: int, width: float, border: float) -> bool:

@@ -22,9 +22,8 @@ from ..lightmap import (charts as charts_mod, denoise as denoise_mod, fragments 
     sites as sites_mod, texels as texels_mod, validity)
 from ..transport import direct as direct_mod, frame_direct
 from . import directional as directional_mod, memory
-from ..errors import BakeCancelled, BakeError
-from ..options import (AUTO_PHOTONS, DIRECT_MODES, MAX_BOUNCES, MAX_DIRECT_SAMPLES,  # noqa: F401 (re-exported)
-    MAX_PHOTONS, MAX_RESOLUTION, MAX_SPACING, PHOTONS_PER_TEXEL, default)
+from ..errors import BakeCancelled
+from ..options import AUTO_PHOTONS, PHOTONS_PER_TEXEL
 from ..lightmap.noise import MIN_GROUPS, BatchNoise
 from ..estimators import EstimatorSettings
 from ..estimators.discs import SLAB, capped_radius, disc_radius
@@ -32,25 +31,16 @@ from ..estimators.rise import own_surface_rise, piece_extent, welded_pieces
 from ..transport.photons import PhotonTracer
 from ..rays import RayCaster
 from ..scene import Scene
-from .batches import BLOCKS, Partial, Totals, TraceJob, blocks, trace_batches, worker_bytes  # noqa: F401 (the API)
+from .batches import Partial, Totals, TraceJob, blocks, trace_batches, worker_bytes  # noqa: F401 (the API)
 from .results import BakeResult, Progress, RawImages, Snapshot, cancel_fn, preview_images, si  # noqa: F401 (the API)
 from .settings import BakeSettings  # noqa: F401 (the API)
-from .writing import output_paths, warn_stale, write, write_many  # noqa: F401 (the API)
+from .writing import warn_stale, write, write_many  # noqa: F401 (the API)
+from .finishing import Finishing
 
-# Ranges and defaults of the settings: options.py (re-exported here for the bake's own messages).
 # Automatic photon count (photons = 0): PHOTONS_PER_TEXEL for each lightmap texel to bake, within
 # AUTO_PHOTONS. At 16 a texel the default (histogram + OIDN) bake of a fully covered lightmap
 # lands about 4-8 indirect photons a texel; tracing costs about 0.4 s a million photons on 2 cores.
 RAYS_PER_SECOND = 2.0e6  # photon segments traced a second and thread, for the time a bake announces
-# From this many pixels a lightmap's soft direct light (area lights, emissive meshes, the sky) and its
-# indirect light are denoised together: one OIDN run instead of two, where OIDN costs more than the
-# photons (docs/real_levels.md). At 64² on the project's scenes together was 0.2-0.5 points of RMSE
-# worse on the L-room and the Cornell box, 0.2-0.7 better on the window room and the courtyard.
-ONE_PASS_FROM = 1024 * 1024
-# From this many pixels the texels' positions and normals are set aside while a lightmap is
-# denoised, found again after (about 0.1 s a million texels on 2 cores): 48 bytes a texel.
-ASIDE_FROM = 1024 * 1024
-
 
 def compute(scene: Scene, settings: BakeSettings, progress: Optional[Callable[[Progress], None]] = None,
             cancel=None, cluster=None, frame_state: Optional[estimators.FrameState] = None,
@@ -170,7 +160,7 @@ class _Pipeline:
                                                  f"texels ({PHOTONS_PER_TEXEL} a texel; set them with --photons); "
                                                  f"tracing them should take about {expect:.2g} s on {self.threads} "
                                                  "threads"))
-        self.need = _check_memory(scene, settings, self.names, self.batch_size, per_photon, self.per_photon_kept)
+        self.need = memory.check(scene, settings, self.names, self.batch_size, per_photon, self.per_photon_kept)
 
     def check_cancel(self, fraction=None) -> None:
         if self.cancelled():
@@ -417,18 +407,26 @@ class _Pipeline:
             noise = noise.relative(self.at.lightmaps, partial(_luminance, self.sites.of_sites(value), np.pi))
         self._geometry_back()
         # An estimate with white noise is denoised apart from the direct light (denoise.py). The
-        # last estimator of a plain bake takes the direct light over: nothing after it reads it.
-        apart = [None if self.direct_e is None or not kind.for_denoiser else self.direct_e]
-        sharp = None if apart[0] is None else self.sharp_e
-        denoised_apart = apart[0] is not None
+        # last estimator of a plain bake hands the direct light over: nothing after it reads it.
+        apart = self.direct_e is not None and kind.for_denoiser
+        job = Finishing(replace(settings, estimator=name), self.texels, self.direct_e if apart else None,
+                        self.sharp_e if apart else None, self.regions, self.fragments_of,
+                        partial(texels_mod.geometry_set_aside, self.texels, self.scene))
         if name == self.names[-1] and l1 is None:
             self.direct_e = None
-        aside = partial(texels_mod.geometry_set_aside, self.texels, self.scene)
-        result = _finish(replace(settings, estimator=name), self.bounces, self.texels, value, out.counters,
-                         self.tracer, seconds, self.direct_info, apart, self.regions, sharp, self.fragments_of, aside)
-        result.direct["denoised_apart"] = denoised_apart and bool(result.raw_images)
-        result.direct["sharp_kept"] = sharp is not None and bool(result.raw_images)
-        apart = sharp = out = value = None
+        made = job.images(value, out.counters)
+        job = None
+        if made.denoise_seconds is not None:
+            seconds["denoise"] = made.denoise_seconds
+        result = BakeResult(replace(settings, estimator=name), self.bounces, made.images, made.masks,
+                            made.centre_masks, self.texels, value, self.tracer.stats, out.counters, seconds,
+                            direct=dict(self.direct_info), warnings=made.warnings,
+                            raw_images=RawImages(self.texels, value, settings.margin, made.images)
+                            if made.denoise_seconds is not None else {})
+        result.direct["denoised_apart"] = result.direct["sharp_kept"] = False
+        if result.raw_images:
+            result.direct["denoised_apart"], result.direct["sharp_kept"] = apart, apart and self.sharp_e is not None
+        out = value = made = None
         if self.mask is not None:
             directional_mod.shadowmask_images(result, self.mask)
         if l1 is not None:
@@ -474,9 +472,7 @@ def layout_warnings(texels, estimator_settings, radius=None) -> list:
     out = []
     for lm in texels.lightmaps:
         if lm.overlap >= OVERLAP_WARNING:
-            out.append(f"object '{lm.name}': {100 * lm.overlap:.0f} % of its lightmap texels lie under two or more "
-                       "faces (overlapping lightmap UVs, e.g. Array or Mirror copies sharing them): those faces get "
-                       "one shared value; give every face its own UV space (Lightmap Pack)")
+            out.append(_overlap_warning(lm))
         fragmented = charts_mod.warning(lm)
         if fragmented:
             out.append(fragmented)
@@ -498,6 +494,19 @@ def layout_warnings(texels, estimator_settings, radius=None) -> list:
                        f"for {', '.join(wide[:5])}{' …' if len(wide) > 5 else ''}, so each such lightmap is one "
                        f"blurred average: lower {setting[0]}")
     return out
+
+
+def _overlap_warning(lm) -> str:
+    """Overlapping lightmap UVs, by object (an atlas's: the objects whose texels overlap)."""
+    why = ("(overlapping lightmap UVs, e.g. Array or Mirror copies sharing them): those faces get one shared "
+           "value; give every face its own UV space (Unwrap Lightmap UVs, or apply the modifiers that copy faces)")
+    if not lm.placement:
+        return f"object '{lm.name}': {100 * lm.overlap:.0f} % of its lightmap texels lie under two or more faces {why}"
+    named = sorted(((n, p.get("overlap", 0.0)) for n, p in lm.placement.items() if p.get("overlap", 0.0) > 0),
+                   key=lambda np_: -np_[1])
+    listed = ", ".join(f"'{n}' ({100 * v:.0f} %)" for n, v in named[:6]) + (" …" if len(named) > 6 else "")
+    return (f"objects {listed} in atlas '{lm.name}': their lightmap texels lie under two or more faces "
+            f"({100 * lm.overlap:.0f} % of the atlas's) {why}")
 
 
 def indirect_spacing(settings: BakeSettings, frame_state=None) -> int:
@@ -543,134 +552,6 @@ def _value(est, direct_e, share) -> np.ndarray:
         total /= np.pi
         value[a:b] = total
     return value
-
-
-def _finish(settings, bounces, texels, value, counters, tracer, seconds, direct_info=None,
-            direct=None, regions=None, sharp=None, fragments_of=None, aside=None) -> BakeResult:
-    """The per-texel E/π `value` as dilated (and denoised) images. `direct`: [the direct irradiance E
-    in `value`, or None], to be denoised on its own and the rest (the indirect estimate) on its own
-    (the list is emptied once the last lightmap has taken its part: whoever passes the only other
-    reference lets the array go before the last denoise); `sharp`:
-    the part of `direct` from point, spot and sun lights, kept as it is (their shadow rays are exact
-    away from penumbrae; docs/real_levels.md). `regions`: {object name: texels that see each other
-    (validity.regions)}, each denoised apart. `fragments_of(lm)`: lightmap `lm`'s texels of charts too
-    narrow for OIDN and their neighbours on the surface (fragments.find), smoothed instead.
-    `aside()`: a context in which the texels' positions and normals are set aside, for the denoise
-    of lightmaps of ASIDE_FROM pixels or more (texels.geometry_set_aside)."""
-    result_images, masks, centre_masks = {}, {}, {}
-    warnings = []
-    denoise = settings.denoise and denoise_mod.available()
-    if settings.denoise and not denoise:
-        warnings.append("lightmaps not denoised: the pyoidn package is not installed")
-    if not denoise and estimators.get(settings.estimator).for_denoiser:
-        warnings.append(f"estimator '{settings.estimator}' without denoising: its lightmaps keep the photons' "
-                        "noise texel by texel (disc_index gives smoother raw lightmaps)")
-    t0 = time.perf_counter()
-    direct = [None] if direct is None else direct
-    for lm in texels.lightmaps:
-        pixel = texels.pixel[lm.texels]
-        if denoise:
-            big = aside is not None and lm.width * lm.height >= ASIDE_FROM
-            result_images[lm.name], mask = _denoised(settings, texels, lm, value, direct, sharp,
-                                                     (regions or {}).get(lm.name), fragments_of, counters,
-                                                     aside if big else contextlib.nullcontext)
-        else:
-            img, mask = texels_mod.to_image(value[lm.texels], lm, pixel)
-            result_images[lm.name] = texels_mod.dilate(img, mask, settings.margin, in_place=True)
-        masks[lm.name] = mask
-        centre_masks[lm.name] = np.zeros_like(mask)
-        at_centre = texels.centre_inside[lm.texels]
-        if texels.cuts is not None:
-            at_centre = at_centre & ~texels.cuts.moved[lm.texels]
-        centre_masks[lm.name].flat[pixel[at_centre]] = True
-    if denoise:
-        seconds["denoise"] = time.perf_counter() - t0
-    raw_images = RawImages(texels, value, settings.margin, result_images) if denoise else {}
-    return BakeResult(settings, bounces, result_images, masks, centre_masks, texels, value, tracer.stats,
-                      counters, seconds, direct=dict(direct_info or {}), raw_images=raw_images,
-                      warnings=warnings)
-
-
-def _denoised(settings, texels, lm, value, direct, sharp, regions, fragments_of, counters, aside) -> tuple:
-    """Lightmap `lm` denoised (by region, its fragments smoothed) and its mask (`_finish`). With
-    `direct` ([array]; emptied after the last lightmap took its part), the indirect part and the
-    soft emitters' direct part are denoised apart (together from ONE_PASS_FROM pixels), and the
-    `sharp` lights' part added as the shadow rays gave it. Each part is made per texel and
-    scattered into one image the denoiser may work in, and the sharp part's image only once the
-    denoiser is done: at 2048² each image is 50 MB. The fragments are found first, the last read
-    of the texels' geometry, which `aside()` may then set aside."""
-    pixel = texels.pixel[lm.texels]
-    mask = np.zeros(lm.height * lm.width, bool)
-    mask[pixel] = True
-    mask = mask.reshape(lm.height, lm.width)
-    frag = fragments_of(lm) if fragments_of is not None else None
-    counters["fragment_texels"] = counters.get("fragment_texels", 0) + (len(frag) if frag else 0)
-    with aside():
-        return _denoised_parts(settings, texels, lm, value, direct, sharp, regions, frag, mask, pixel)
-
-
-def _denoised_parts(settings, texels, lm, value, direct, sharp, regions, frag, mask, pixel) -> tuple:
-    """`_denoised`'s parts: made per texel, scattered, denoised and added."""
-    area = lambda: texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)[0][..., 0]  # noqa: E731
-    denoised = partial(denoise_mod.denoise_lightmap, mask=mask, margin=settings.margin, weights=area,
-                       regions=regions, fragments=frag, apart=denoise_mod.FILL_RINGS if len(lm.members) > 1 else 1,
-                       own=True)
-    image = lambda values: texels_mod.to_image(values, lm, pixel)[0]  # noqa: E731
-    if direct[0] is None:
-        return denoised(image(value[lm.texels])), mask
-    # E/π per texel, in float32 as the images hold it: the indirect part (value less the direct
-    # light), and the direct light less the sharp lights' part (what the soft emitters gave).
-    per_texel = lambda a: (a[lm.texels] / np.float32(np.pi)).astype(np.float32, copy=False)  # noqa: E731
-    first = per_texel(direct[0])
-    if lm is texels.lightmaps[-1]:
-        direct[0] = None
-    rest = np.subtract(value[lm.texels], first)
-    np.maximum(rest, 0.0, out=rest)
-    if sharp is not None:
-        np.subtract(first, per_texel(sharp), out=first)
-        np.maximum(first, 0.0, out=first)
-    parts = [rest, first]  # each part's only reference: scattered, it goes
-    rest = first = None
-    if sharp is not None and lm.width * lm.height >= ONE_PASS_FROM:  # soft direct + indirect: one OIDN run
-        parts[0] += parts.pop()
-        out = denoised(image(parts.pop()))
-    else:
-        out = denoised(image(parts.pop(0)))
-        out += denoised(image(parts.pop()))
-    if sharp is not None:
-        kept = texels_mod.dilate(image(per_texel(sharp)), mask, settings.margin, in_place=True)
-        out += kept
-    return out, mask
-
-
-
-def _check_memory(scene, settings, names, batch, per_photon, per_photon_kept) -> memory.Estimate:
-    """The bake's peak memory, estimated before any work; over the budget (the setting, else 80 %
-    of what the system has free) it is a BakeError that says what to lower."""
-    pixels = sum(o.resolution * o.resolution for o in scene.objects if o.bake)
-    per_texel = {n: estimators.get(n).bytes_per_texel for n in names}
-    hits = int(settings.photons * per_photon_kept) if any(estimators.get(n).stores_hits for n in names) else 0
-    geometry = scene.positions.nbytes + scene.normals.nbytes + scene.uvs.nbytes + 24 * scene.triangle_count
-    denoised = max((o.resolution * o.resolution for o in scene.objects if o.bake), default=0) \
-        if settings.denoise and denoise_mod.available() else 0
-    need = memory.estimate(pixels, per_texel, batch, per_photon, per_photon_kept,
-                           settings.threads or os.cpu_count() or 1, hits, geometry, denoised,
-                           settings.directional != "none", bool(settings.shadowmask))
-    budget = settings.memory_budget_mb * 1e6 if settings.memory_budget_mb else 0.8 * memory.available_bytes()
-    if budget and need.total > budget:
-        advice = []
-        if hits and need.parts.get("photon map hits", 0) > 0.3 * need.total:
-            advice.append("a DETP estimator (they stream photons) or fewer photons")
-        per_pixel = need.parts["texels"] + need.parts["lightmap images"] + need.parts.get("denoiser", 0)
-        if per_pixel > 0.3 * need.total:
-            advice.append("a lower resolution")
-        if need.parts["photon batches"] + need.parts["stream logs"] > 0.3 * need.total:
-            advice.append("fewer bounces or a smaller batch")
-        raise BakeError(f"this bake would need about {need.total / 1e9:,.1f} GB of memory (the most: "
-                        f"{need.biggest()}), over the budget of {budget / 1e9:,.1f} GB"
-                        f"{' (the memory budget preference)' if settings.memory_budget_mb else ' (80 % of free memory)'}"
-                        f": use {' or '.join(advice) or 'a smaller bake'}")
-    return need
 
 
 def bake(scene: Scene, settings: BakeSettings, out_dir: str | os.PathLike,

@@ -75,7 +75,7 @@ def make_images(result, l1, regions=None, fragments_of=None, sharp=None) -> None
     """Fill `result.l1_images` (sh: (H, W, 9) in sh.L1_CHANNELS order; dominant: (H, W, 4) in
     sh.DOMINANT_CHANNELS order) from the per-texel L1 (N, 9), and `result.directional`. `sharp`:
     the shadow rays' E (N, 3) and L1 (N, 9) of point, spot and sun lights, kept undenoised as the
-    plain lightmap keeps them (bake._finish)."""
+    plain lightmap keeps them (finishing.Finishing)."""
     settings, texels = result.settings, result.texels
     denoise = settings.denoise and denoise_mod.available()
     clamped = 0

@@ -2,10 +2,10 @@
 as typed events.
 
 Every front end (the Blender operators, `blender -c detp_bake`, `python -m detp_bake`) makes a Job
-from settings and an exported scene and reads its events: Started, Phase, Progress (with an
-ETA), Warning, Preview, then exactly one of Result, Error or Cancelled. The job turns the core's
+from settings and an exported scene and reads its events: Started, Phase, Status (with an
+ETA), Notice, Preview, then exactly one of Result, Error or Cancelled. The job turns the core's
 progress callback, its cancel and stop callables and its exceptions into those events, so no
-front end talks to bake.py's four channels itself. A frame range's progress (`Progress.part`) runs
+front end talks to bake.py's four channels itself. A frame range's progress (`Status.part`) runs
 once over the whole range. The command line exports each frame when the worker asks for it, on its
 own thread (`MainThread`: bpy is not thread-safe); the panel exports every frame first.
 
@@ -61,7 +61,8 @@ class Phase(Event):
 
 
 @dataclass
-class Progress(Event):
+class Status(Event):
+    """How far the job has got (bake.py's Progress, with the whole job's share and the time left)."""
     phase: str
     fraction: float  # of the phase
     message: str
@@ -70,7 +71,8 @@ class Progress(Event):
 
 
 @dataclass
-class Warning(Event):  # noqa: A001  (the job's own kind of warning)
+class Notice(Event):
+    """A warning the job passes on to the person (the front end shows it once)."""
     message: str
 
 
@@ -193,7 +195,7 @@ class Job:
         self._stop = threading.Event()
         self.thread: Optional[threading.Thread] = None
         self.phase = "export"
-        self.last: Optional[Progress] = None
+        self.last: Optional[Status] = None
         self.outcome: Optional[Event] = None  # the terminal event, once the worker has sent it
         self._next_preview = -1e9  # perf_counter time
         self._clock = _Clock()
@@ -274,7 +276,7 @@ class Job:
         if p.part is not None:  # a frame of a range: one bar and one ETA over the whole range
             k, n = p.part
             overall = (k + overall) / max(n, 1)
-        self.last = Progress(p.phase, p.fraction, p.message, overall, self._clock.eta(overall))
+        self.last = Status(p.phase, p.fraction, p.message, overall, self._clock.eta(overall))
         self._send(self.last)
 
     def _preview(self, partial: bake_mod.Snapshot) -> None:
@@ -296,7 +298,7 @@ class Job:
             self._send(Started(self.kind, list(self.names), photons,
                                sum(o.bake for o in self.scene.objects) if self.scene is not None else 0))
             for message in self._warnings:
-                self._send(Warning(message))
+                self._send(Notice(message))
             outcome = self._compute()
         except BakeCancelled:
             outcome = Cancelled(self.phase)
@@ -338,7 +340,7 @@ class Job:
             if self.out_dir is not None:  # older files of these lightmaps that this bake leaves
                 bake_mod.warn_stale(self.out_dir, result, found.append)
             for message in dict.fromkeys(found + result.warnings):
-                self._send(Warning(message))
+                self._send(Notice(message))
             result.warnings = list(dict.fromkeys(self._warnings + found + result.warnings))  # for report.json
         report, summary = None, None
         if self.out_dir is not None:  # every file together, or none (bake.write_many)

@@ -19,6 +19,9 @@ except ImportError:  # Windows
     resource = None
 from dataclasses import dataclass
 
+from .. import estimators
+from ..errors import BakeError
+from ..lightmap import denoise as denoise_mod
 from ..transport.photons import PhotonTracer
 
 SEGMENT_BYTES = 40  # origin, direction, length, flux (float32)
@@ -208,3 +211,32 @@ def reset_peak() -> None:
             f.write("5")
     except OSError:
         pass
+
+
+def check(scene, settings, names, batch, per_photon, per_photon_kept) -> Estimate:
+    """The bake's peak memory, estimated before any work; over the budget (the setting, else 80 %
+    of what the system has free) it is a BakeError that says what to lower."""
+    pixels = sum(o.resolution * o.resolution for o in scene.objects if o.bake)
+    per_texel = {n: estimators.get(n).bytes_per_texel for n in names}
+    hits = int(settings.photons * per_photon_kept) if any(estimators.get(n).stores_hits for n in names) else 0
+    geometry = scene.positions.nbytes + scene.normals.nbytes + scene.uvs.nbytes + 24 * scene.triangle_count
+    denoised = max((o.resolution * o.resolution for o in scene.objects if o.bake), default=0) \
+        if settings.denoise and denoise_mod.available() else 0
+    need = estimate(pixels, per_texel, batch, per_photon, per_photon_kept,
+                           settings.threads or os.cpu_count() or 1, hits, geometry, denoised,
+                           settings.directional != "none", bool(settings.shadowmask))
+    budget = settings.memory_budget_mb * 1e6 if settings.memory_budget_mb else 0.8 * available_bytes()
+    if budget and need.total > budget:
+        advice = []
+        if hits and need.parts.get("photon map hits", 0) > 0.3 * need.total:
+            advice.append("a DETP estimator (they stream photons) or fewer photons")
+        per_pixel = need.parts["texels"] + need.parts["lightmap images"] + need.parts.get("denoiser", 0)
+        if per_pixel > 0.3 * need.total:
+            advice.append("a lower resolution")
+        if need.parts["photon batches"] + need.parts["stream logs"] > 0.3 * need.total:
+            advice.append("fewer bounces or a smaller batch")
+        raise BakeError(f"this bake would need about {need.total / 1e9:,.1f} GB of memory (the most: "
+                        f"{need.biggest()}), over the budget of {budget / 1e9:,.1f} GB"
+                        f"{' (the memory budget preference)' if settings.memory_budget_mb else ' (80 % of free memory)'}"
+                        f": use {' or '.join(advice) or 'a smaller bake'}")
+    return need

@@ -16,7 +16,7 @@ from typing import Optional
 
 import numpy as np
 
-from .. import estimators
+from .. import estimators, options
 from ..errors import BakeCancelled
 from ..scene import AreaLight, BakeObject, PointLight, Scene, SpotLight, SunLight
 from . import bake, job
@@ -67,7 +67,7 @@ def warm_up(threads: int = 0, cancel=None) -> float:
     """Bake the tiny box with every estimator, both ways of finding direct light; returns seconds.
     The caller holds the job lock (or knows nothing else runs numba)."""
     t0 = time.perf_counter()
-    for direct in bake.DIRECT_MODES:
+    for direct in options.DIRECT_MODES:
         settings = bake.BakeSettings(photons=4000, resolution=8, direct=direct, direct_samples=2, denoise=False,
                                      threads=threads, batch_size=1000)
         bake.compute_many(_box(), settings, estimators.names(), cancel=cancel)

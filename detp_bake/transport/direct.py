@@ -36,132 +36,27 @@ import math
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numba
 import numpy as np
 
-from ..errors import BakeCancelled, BakeError
-from .lights import emissive_triangles, spot_factor
+from ..errors import BakeCancelled
+from .lights import spot_factor
+from .direct_lights import AREA, MESH, POINT, SHARP_KINDS, SUN, WORLD_MAP, direct_lights
 from ..sampling import (cone_lobe, cosine_hemisphere, in_frame, inline, jit, orthonormal_basis, photon_rng,
     search_cdf, seed_key, uniform2, uniform_disc, uniform_triangle)
 from .environment import environment_rays
 from .scattering import MAX_PASSES
-from ..scene import AreaLight, PointLight, Scene, SpotLight, SunLight
+from ..scene import Scene
 from .textures import opacity_at, surfaces
 from ..lightmap.texel_area import area_point, texel_squares
 from ..lightmap.texels import geometric_normals
 
-POINT, SUN, AREA, MESH, WORLD, WORLD_MAP = 0, 1, 2, 3, 4, 5
-# Point, spot and sun lights: exact away from penumbrae (every ray agrees), even with a radius or an
-# angle; area lights, emissive meshes and the world are noisy wherever they are partly hidden.
-SHARP_KINDS = (POINT, SUN)
 FAR = 1e37
 CHUNK = 2048  # texels per work item
 DEFAULT_SAMPLES = 16
-FIRST_SAMPLES = 4  # a point light's or sharp sun's first rays per texel, spread over its middle
-DISAGREE = 0.05  # ... and more where they differ by more than this share of the largest
-
-
-@dataclass
-class DirectLight:
-    """One light as the shadow-ray kernel reads it: `kind`, a float64 parameter row, `samples`
-    rays per texel, and for emissive meshes the triangle table."""
-    name: str
-    kind: int
-    params: np.ndarray
-    samples: int
-    extra: int = 0  # a light without extent, spread: rays added where the first `samples` disagree
-    tri_cdf: np.ndarray = None
-    tri_pos: np.ndarray = None
-    tri_normal: np.ndarray = None
-    tri_radiance: np.ndarray = None  # per triangle, radiance × area / probability (RGB)
-    env: tuple = None  # WORLD_MAP: the environment's sampling tables (environment.py)
-
-
-def _row(*parts) -> np.ndarray:
-    out = []
-    for p in parts:
-        out.extend(np.asarray(p, np.float64).ravel().tolist())
-    row = np.zeros(32)
-    row[:len(out)] = out
-    return row
-
-
-def direct_lights(scene: Scene, samples: int, spread: bool = True) -> list[DirectLight]:
-    """The scene's emitters in the kernel's form. Param rows (float64[32]):
-    POINT: position(3) intensity RGB(3) radius axis(3) cos_half smooth is_spot;
-    SUN: towards-sun direction(3) irradiance(3) cos_max;
-    AREA: matrix rows 0-2 (12) emitting normal(3) size_x size_y is_disc P/π RGB(3);
-    WORLD: radiance(3). A point light or a sharp sun takes one ray per texel, or, spread over the
-    texel's middle (`spread`), FIRST_SAMPLES rays and `samples` more where they disagree (a shadow
-    edge or a spot's rim crosses the texel): four alone left those texels a quarter off Cycles'."""
-    delta = min(samples, FIRST_SAMPLES) if spread else 1
-    extra = samples if spread and samples > FIRST_SAMPLES else 0
-    out = []
-    for light in scene.lights:
-        if isinstance(light, (PointLight, SpotLight)):
-            intensity = np.asarray(light.power, np.float64) / (4.0 * np.pi)
-            radius = float(light.radius)
-            if isinstance(light, SpotLight):
-                axis = np.asarray(light.direction, np.float64)
-                axis = axis / np.linalg.norm(axis)
-                half = 0.5 * min(float(light.spot_size), np.pi)
-                cos_half = np.cos(half)
-                spot = (axis, cos_half, (1.0 - cos_half) * float(light.blend), 1.0)
-            else:
-                spot = (np.zeros(3), -2.0, 0.0, 0.0)
-            out.append(DirectLight(light.name, POINT, _row(light.position, intensity, radius, *spot),
-                                   samples if radius > 0.0 else delta, 0 if radius > 0.0 else extra))
-        elif isinstance(light, SunLight):
-            d = np.asarray(light.direction, np.float64)
-            d = -d / np.linalg.norm(d)
-            cos_max = float(np.cos(0.5 * light.angle)) if light.angle > 0.0 else 1.0
-            out.append(DirectLight(light.name, SUN, _row(d, light.irradiance, cos_max),
-                                   samples if cos_max < 1.0 else delta, 0 if cos_max < 1.0 else extra))
-        elif isinstance(light, AreaLight):
-            m = np.asarray(light.matrix, np.float64)
-            xy = np.cross(m[:3, 0], m[:3, 1])
-            normal = -xy * np.sign(np.sum(xy * m[:3, 2]))  # faces local -Z, as lights.area_emitter
-            normal /= np.linalg.norm(normal)
-            shape = light.shape.upper()
-            sx = float(light.size_x)
-            sy = float(light.size_x if shape in ("SQUARE", "DISK") else light.size_y)
-            disc = 1.0 if shape in ("DISK", "ELLIPSE") else 0.0
-            out.append(DirectLight(light.name, AREA, _row(m[:3, :4], normal, sx, sy, disc,
-                                                          np.asarray(light.power, np.float64) / np.pi),
-                                   samples))
-        else:
-            raise BakeError(f"unsupported light {light!r}")
-    mesh = _mesh_light(scene, samples)
-    if mesh is not None:
-        out.append(mesh)
-    world = np.asarray(scene.world, np.float64)
-    if scene.world_map is not None:
-        pixels, marginal, cond, prob = scene.world_map.tables()
-        light = DirectLight("world", WORLD_MAP, np.zeros(32), samples)
-        light.env = (marginal, cond, prob, np.ascontiguousarray(scene.world_map.rotation, np.float64), pixels)
-        out.append(light)
-    elif np.any(world != 0.0):
-        out.append(DirectLight("world", WORLD, _row(world), samples))
-    return out
-
-
-def _mesh_light(scene: Scene, samples: int) -> Optional[DirectLight]:
-    found = emissive_triangles(scene)
-    if found is None:
-        return None
-    tri, p, normal, area = found
-    radiance = scene.emission[tri].astype(np.float64)
-    w = np.abs(radiance).mean(axis=1) * area
-    cdf = np.cumsum(w)
-    total = cdf[-1]
-    cdf /= total
-    per_pick = radiance * (area * total / w)[:, None]  # radiance × area / probability
-    return DirectLight("emissive meshes", MESH, np.zeros(32), samples, tri_cdf=np.ascontiguousarray(cdf),
-                       tri_pos=np.ascontiguousarray(p), tri_normal=np.ascontiguousarray(normal),
-                       tri_radiance=np.ascontiguousarray(per_pick))
+DISAGREE = 0.05  # a sharp light adds rays where its first ones differ by more than this share (direct_lights)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -646,7 +541,7 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     `select`: the lights with extent share `samples` rays each per texel, dealt out by what each
     would give the texel unshadowed (light_shares), instead of `samples` rays each. `sharp`, an
     (N, 3) float32 array when given, receives the part of point, spot and sun lights (SHARP_KINDS):
-    their rays all agree away from penumbrae, so that part needs no denoising (bake._finish). `l1`,
+    their rays all agree away from penumbrae, so that part needs no denoising (finishing.Finishing). `l1`,
     an (N, 9) float32 array when given, receives the directional lightmap's L1 of the same rays
     (lightmap/sh.py: each arriving ray's irradiance times its direction, axis-major), and `sharp_l1`
     (with `sharp` and `l1`) the sharp lights' part of it. `shadowmask`: names of lights whose
