@@ -12,7 +12,8 @@ and packed, saved compressed. Nothing in the geometry is changed or decimated. T
   linked copies of the whole vase and one collection instance of it, on a table.
 - lamp: LightsPunctualLamp (five point lights from KHR_lights_punctual, an emissive shade)
   in the corner of a small room with a window.
-- living_room: GlamVelvetSofa (its own sun), SheenChair (two UV maps) and a hidden linked copy of it, StainedGlassLamp (alpha-masked grill and glass) on a floor with two walls; the chair's
+- living_room: GlamVelvetSofa (its own sun), SheenChair (two UV maps) and a hidden linked copy
+  of it, StainedGlassLamp (alpha-masked grill and glass) on a floor with two walls; the chair's
   and the sofa's unused variant materials added as unused material slots.
 
 Usage (with the bpy module, Blender 4.5 or 5.x):
