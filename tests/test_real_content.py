@@ -233,3 +233,12 @@ def test_the_viewer_shows_every_baked_primitive_lit_by_its_lightmap(baked):
     ratio = bright[mid] / np.maximum(dim[mid], 1e-6)
     assert mid.sum() > 100 and abs(np.median(ratio) - 2) < 0.1 and (np.abs(ratio - 2) < 0.3).mean() > 0.9, \
         (int(mid.sum()), float(np.median(ratio)))
+
+
+def test_a_flag_of_the_other_mode_is_refused_before_any_work(tmp_path):
+    """--atlas-size on per-object lightmaps did nothing in silence; it is refused, and nothing written."""
+    proc = subprocess.run([sys.executable, "-m", "detp_bake", "bake", str(SCENES / "lamp.blend"), "--out",
+                           str(tmp_path / "out"), "--resolution", "16", "--atlas-size", "256"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert proc.returncode == 2 and "--atlas-size" in proc.stderr and "--lightmaps atlas" in proc.stderr, proc.stderr
+    assert not (tmp_path / "out").exists()
