@@ -139,7 +139,7 @@ def test_faces_copied_by_a_modifier_are_named_before_the_bake_and_in_the_overlap
     from detp_bake import blender
     from detp_bake.estimators import EstimatorSettings
     from detp_bake.lightmap import texels
-    from detp_bake.run.bake import layout_warnings
+    from detp_bake.run.layout_warnings import layout_warnings
     from detp_bake.run.settings import BakeSettings
     bpy.ops.wm.open_mainfile(filepath=str(scene))
     array = bpy.data.objects["CrateA"].modifiers.new("Row", "ARRAY")

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import BakeError
 from ..lightmap import atlas as atlas_mod
-from .uv import unwrap_into
+from .uv import mesh_arrays, unwrap_into
 
 ATLAS_UV = "LightmapAtlas"
 SMART_UV = "detp_bake smart islands"
@@ -62,20 +62,11 @@ def _copied(objects, log) -> None:
 
 def _triangles(obj, layer: str):
     """(loop indices (T, 3), world positions (T, 3, 3), the layer's UVs (T, 3, 2)) of obj's mesh."""
-    me = obj.data
-    me.calc_loop_triangles()
-    loops = np.empty(len(me.loop_triangles) * 3, np.int64)
-    me.loop_triangles.foreach_get("loops", loops)
-    vertex = np.empty(len(me.loops), np.int64)
-    me.loops.foreach_get("vertex_index", vertex)
-    co = np.empty(len(me.vertices) * 3, np.float64)
-    me.vertices.foreach_get("co", co)
+    loops, vertex, co, uv = mesh_arrays(obj, layer, np.float64)
     m = np.array(obj.matrix_world, np.float64)
-    world = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
-    uv = np.empty(len(me.loops) * 2, np.float64)
-    me.uv_layers[layer].uv.foreach_get("vector", uv)
+    world = co @ m[:3, :3].T + m[:3, 3]
     loops = loops.reshape(-1, 3)
-    return loops, world[vertex[loops]], uv.reshape(-1, 2)[loops]
+    return loops, world[vertex[loops]], uv[loops]
 
 
 def _islands(obj, layer: str, charts: str):

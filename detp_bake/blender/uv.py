@@ -75,22 +75,28 @@ def ensure_lightmap_uv(obj, uv_name: str, resolution: int = 0, density: float = 
     return True
 
 
-def _welded(obj, layer: str):
-    """(corner loops of the triangles (T, 3), xatlas vertices, their indices (T, 3), their UVs):
-    one vertex per (mesh vertex, UV) pair, so islands stay joined and seams stay seams; positions
-    in the object's scaled space (texels per metre hold on a scaled object)."""
+def mesh_arrays(obj, layer: str, dtype=np.float32):
+    """(the triangles' corner loops (T·3,), each loop's vertex, the vertices (V, 3), each loop's UV in
+    `layer` (L, 2)) of obj's mesh, read in bulk."""
     me = obj.data
     me.calc_loop_triangles()
     tri_l = np.empty(len(me.loop_triangles) * 3, np.int64)
     me.loop_triangles.foreach_get("loops", tri_l)
     loop_v = np.empty(len(me.loops), np.int64)
     me.loops.foreach_get("vertex_index", loop_v)
-    co = np.empty(len(me.vertices) * 3, np.float32)
+    co = np.empty(len(me.vertices) * 3, dtype)
     me.vertices.foreach_get("co", co)
-    co = co.reshape(-1, 3) * np.abs(np.array(obj.matrix_world.to_scale(), np.float32))
-    uv = np.empty(len(me.loops) * 2, np.float32)
+    uv = np.empty(len(me.loops) * 2, dtype)
     me.uv_layers[layer].uv.foreach_get("vector", uv)
-    uv = uv.reshape(-1, 2)
+    return tri_l, loop_v, co.reshape(-1, 3), uv.reshape(-1, 2)
+
+
+def _welded(obj, layer: str):
+    """(corner loops of the triangles (T, 3), xatlas vertices, their indices (T, 3), their UVs):
+    one vertex per (mesh vertex, UV) pair, so islands stay joined and seams stay seams; positions
+    in the object's scaled space (texels per metre hold on a scaled object)."""
+    tri_l, loop_v, co, uv = mesh_arrays(obj, layer)
+    co = co * np.abs(np.array(obj.matrix_world.to_scale(), np.float32))
     keys, vertex_of_loop = np.unique(np.c_[loop_v, np.round(uv * 1e6)], axis=0, return_inverse=True)
     vertex_of_loop = vertex_of_loop.reshape(-1)
     first = np.zeros(len(keys), np.int64)
