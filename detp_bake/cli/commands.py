@@ -79,6 +79,9 @@ def _check_and_open(args, settings, bl_scene, warn=output.log, names=None):
     elif args.apply:
         warn("--apply without --save: the lightmaps are wired into the materials in memory only, and "
              "nothing lasting happens (add --save OUT.blend)")
+    resources = getattr(args, "resources", None)  # main's: the cluster is closed when the command ends
+    if resources is not None:
+        args.cluster = resources.enter_context(cluster_for(args))
     try:
         from .. import blender
     except ImportError as exc:
@@ -86,9 +89,6 @@ def _check_and_open(args, settings, bl_scene, warn=output.log, names=None):
             raise
         raise BakeError("the 'bpy' module is not installed: run inside Blender or install the bpy wheel "
                         "(make demo sets one up)") from None
-    resources = getattr(args, "resources", None)  # main's: the cluster is closed when the command ends
-    if resources is not None:
-        args.cluster = resources.enter_context(cluster_for(args))
     if bl_scene is None:
         bl_scene = blender.open_blend(Path(args.scene))
     return blender, bl_scene, admission
