@@ -10,7 +10,7 @@ VENV45 := .venv
 VENV52 := .venv-5.2
 VENVCORE := .venv-core
 export BLENDER_USER_RESOURCES ?= $(CURDIR)/.cache/blender-user
-PYTEST_ARGS ?=
+PYTEST_ARGS ?= --durations=25
 # numba's cache checks only the date of the file that holds a kernel, not of the files whose
 # helpers it inlines: a cache folder per state of the core's sources never serves stale code.
 CORE_HASH := $(shell cat $$(find detp_bake -name '*.py' | sort) | cksum | cut -d' ' -f1)
