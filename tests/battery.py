@@ -36,18 +36,18 @@ def _hold(phase):
 def _patch():
     phase = _env("DETP_TEST_HOLD", "")
     from detp_bake.lightmap import denoise, staging, texels
-    from detp_bake.run import bake
+    from detp_bake.run import pipeline
     if phase == "rasterise":
         rasterise = texels.rasterise
         texels.rasterise = lambda *a, **k: (_hold(phase), rasterise(*a, **k))[1]
     if phase == "trace":
-        trace = bake.trace_batches
+        trace = pipeline.trace_batches
 
         def traced(*a, **k):  # a run of batches traced, then held before it is summed
             part = trace(*a, **k)
             _hold(phase)
             return part
-        bake.trace_batches = traced
+        pipeline.trace_batches = traced
     if phase == "denoise":
         one = denoise.denoise_lightmap
         denoise.denoise_lightmap = lambda *a, **k: (_hold(phase), one(*a, **k))[1]
