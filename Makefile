@@ -105,23 +105,13 @@ chromium:
 		echo "!! /usr/bin/chromium not found: tests/test_viewer.py will skip (install it: sudo apt-get install chromium)"; \
 	fi
 
-# make viewer [MODEL=path/to/scene.glb] [VIEWER_PORT=8000]: serve the repository and print the URL.
-# A model outside the repository is linked under build/viewer/ so the server can reach it.
+# make viewer [MODEL=path/to/scene.glb] [VIEWER_PORT=8000]: serve the viewer page, its three.js files
+# and the one model on 127.0.0.1 (viewer/serve.py; never the repository), and print the URL.
 VIEWER_PORT ?= 8000
 MODEL ?=
 viewer: viewer-node
 	@test -f $(VIEWER_NODE) || { echo "error: viewer/node_modules is missing (npm ci --prefix viewer)"; exit 1; }
-	@url="http://127.0.0.1:$(VIEWER_PORT)/viewer/index.html"; \
-	if [ -n "$(MODEL)" ]; then \
-		model="$$(realpath "$(MODEL)")" || exit 1; \
-		case "$$model" in \
-			"$(CURDIR)"/*) rel="$${model#$(CURDIR)/}";; \
-			*) mkdir -p build/viewer && ln -sf "$$model" "build/viewer/$$(basename "$$model")" && rel="build/viewer/$$(basename "$$model")";; \
-		esac; \
-		url="$$url?model=/$$rel"; \
-	fi; \
-	echo "open $$url  (or drop a .glb on the page; Ctrl+C stops the server)"; \
-	exec python3 -m http.server $(VIEWER_PORT) --bind 127.0.0.1 --directory "$(CURDIR)" >/dev/null
+	@exec python3 viewer/serve.py --port $(VIEWER_PORT) $(if $(MODEL),--model "$(MODEL)")
 
 # Extension zips, one per Blender line and platform of blender_manifest.toml, each with that line's
 # wheels only (cp311 for 4.5, cp313 for 5.2; numpy is Blender's own):

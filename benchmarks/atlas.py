@@ -77,7 +77,7 @@ def main() -> None:
               f"{at['images']:>8} {per['seconds']:>12.1f} {at['seconds']:>8.1f}", flush=True)
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"cores": os.cpu_count(), "rows": rows}, indent=2))
+    out.write_text(json.dumps({"cores": os.cpu_count(), "rows": rows}, indent=2, allow_nan=False))
     print(f"wrote {out}")
 
 

@@ -69,7 +69,8 @@ def main() -> None:
               f"{100 * r['overhead']:8.1f}% {r.get('units', '-')!s:>5} {r['identical']}")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps({"photons": args.photons, "cores": cores, "rows": rows}, indent=2))
+        Path(args.json).write_text(json.dumps({"photons": args.photons, "cores": cores, "rows": rows}, indent=2,
+                                               allow_nan=False))
 
 
 if __name__ == "__main__":

@@ -73,7 +73,7 @@ def main(argv=None) -> None:
               f"{r['memory_over_none']:7.2f}")
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"args": vars(args), "rows": rows}, indent=2))
+    out.write_text(json.dumps({"args": vars(args), "rows": rows}, indent=2, allow_nan=False))
     print(f"wrote {out}")
 
 

@@ -294,7 +294,7 @@ def main():
         print(f"  oracle subset: {out['oracle_checks'][name]}")
     out["loadavg_end"] = os.getloadavg()  # other processes on the 2 cores skew the times
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(out, indent=1))
+    args.json.write_text(json.dumps(out, indent=1, allow_nan=False))
 
 
 if __name__ == "__main__":

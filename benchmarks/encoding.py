@@ -90,7 +90,7 @@ def main() -> None:
         print(row)
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps({"resolution": args.resolution, "lit_share": encoding.LIT,
-                                           "scenes": results}, indent=1))
+                                           "scenes": results}, indent=1, allow_nan=False))
     print(f"wrote {args.json}")
 
 

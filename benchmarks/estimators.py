@@ -325,7 +325,7 @@ def main(argv=None):
             res = build_scale(planes, radii, args.baseline, args.repeat)
         out = Path(args.json or results_dir / ("disc_index_profile.json" if args.profile else "disc_index_build.json"))
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(res, indent=1))
+        out.write_text(json.dumps(res, indent=1, allow_nan=False))
         print(f"\nwrote {out}")
         return 0
     args.json = args.json or str(results_dir / "estimators.json")
@@ -347,7 +347,7 @@ def main(argv=None):
         results.append(res)
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"cores": os.cpu_count(), "results": results}, indent=1))
+    out.write_text(json.dumps({"cores": os.cpu_count(), "results": results}, indent=1, allow_nan=False))
     print(f"\nwrote {out}")
     return 0
 

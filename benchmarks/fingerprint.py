@@ -75,7 +75,7 @@ def main(argv=None) -> int:
     with scenes.quiet_stdout():
         now = fingerprints()
     if args.out:
-        args.out.write_text(json.dumps(now, indent=1, sort_keys=True))
+        args.out.write_text(json.dumps(now, indent=1, sort_keys=True, allow_nan=False))
         print(f"{len(now)} lightmaps fingerprinted into {args.out}")
         return 0
     before = json.loads(args.check.read_text())

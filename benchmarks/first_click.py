@@ -72,7 +72,7 @@ def main(argv=None) -> int:
     ap.add_argument("--warm-up", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
-        print(json.dumps(child(args.photons, args.warm_up)))
+        print(json.dumps(child(args.photons, args.warm_up), allow_nan=False))
         return 0
     rows = []
     for name, warm_cache, warm_up in CASES:
@@ -97,7 +97,7 @@ def main(argv=None) -> int:
     doc = {"cores": os.cpu_count(), "load_average": os.getloadavg()[0], "photons": args.photons,
            "python": sys.version.split()[0], "rows": rows}
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps(doc, indent=2))
+    Path(args.json).write_text(json.dumps(doc, indent=2, allow_nan=False))
     print(f"load average {doc['load_average']:.1f}, {doc['cores']} cores; {args.json}")
     return 0
 

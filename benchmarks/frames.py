@@ -112,7 +112,7 @@ def main(argv=None):
     target = Path(args.out)
     target.mkdir(parents=True, exist_ok=True)
     name = "frames.json" if args.scene == "quasi_static" else f"frames_{args.scene}.json"
-    (target / name).write_text(json.dumps(out, indent=2))
+    (target / name).write_text(json.dumps(out, indent=2, allow_nan=False))
     print(target / name)
 
 

@@ -276,7 +276,7 @@ def main(argv=None):
         data["phases"].append(phases(bpy, size, log))
     if args.race_size:
         data["race"] = race(bpy, args.race_size, [int(s) for s in args.spp.split(",")], args.reference_spp, log)
-    (out / "levels.json").write_text(json.dumps(data, indent=2))
+    (out / "levels.json").write_text(json.dumps(data, indent=2, allow_nan=False))
     text = markdown(data)
     (out / "levels.md").write_text(text)
     print(text)

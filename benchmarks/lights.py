@@ -80,7 +80,8 @@ def main(argv=None):
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"cores": os.cpu_count(), "threads": threads, "resolution": args.resolution,
-                               "reference": args.reference, "rows": rows, "summary": summary}, indent=1))
+                               "reference": args.reference, "rows": rows, "summary": summary},
+                               indent=1, allow_nan=False))
     print(f"wrote {out}")
 
 

@@ -177,7 +177,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.child:
         c = args.child
-        print(json.dumps(_child(c[0], int(c[1]), int(c[2]), bool(int(c[3])), float(c[4]), c[5], bool(int(c[6])))))
+        print(json.dumps(_child(c[0], int(c[1]), int(c[2]), bool(int(c[3])), float(c[4]), c[5], bool(int(c[6]))),
+                         allow_nan=False))
         return
     rows = []
     print(f"{'estimator':<13} {'texels':>10} {'estimate B/texel':>17} {'measured B/texel':>17} {'ratio':>6} "
@@ -194,7 +195,7 @@ def main(argv=None):
     out.write_text(json.dumps({"resolution": args.resolution, "photons": args.photons, "cores": os.cpu_count(),
                                "denoise": not args.no_denoise, "gutter": args.gutter,
                                "directional": args.directional, "shadowmask": args.shadowmask, "results": rows},
-                              indent=2))
+                              indent=2, allow_nan=False))
     print(f"wrote {out}")
 
 

@@ -202,7 +202,7 @@ def main(argv=None):
     import bpy
     doc = {"cores": os.cpu_count(), "threads": numba.get_num_threads(), "blender": bpy.app.version_string,
            "config": cfg, "seconds": time.perf_counter() - t_start, "results": results}
-    (out / "objects.json").write_text(json.dumps(doc, indent=1))
+    (out / "objects.json").write_text(json.dumps(doc, indent=1, allow_nan=False))
     (out / "objects.md").write_text("\n\n".join(texts) + "\n")
     log(f"wrote {out / 'objects.json'} and {out / 'objects.md'}")
     return 0

@@ -165,7 +165,8 @@ def main(argv=None):
         results[label] = res
         text.append(markdown(label, res))
         print(text[-1], "\n", flush=True)
-    (out / "paper.json").write_text(json.dumps({"cores": os.cpu_count(), "config": cfg, "results": results}, indent=1))
+    (out / "paper.json").write_text(json.dumps({"cores": os.cpu_count(), "config": cfg, "results": results},
+                                                   indent=1, allow_nan=False))
     (out / "paper.md").write_text("\n\n".join(text) + "\n")
     print(f"wrote {out / 'paper.json'}, {out / 'paper.md'}")
     return 0

@@ -602,7 +602,7 @@ def main(argv=None):
             sw["plot"] = plot_sweep(summarise_sweep(sw), dirs)
         text = markdown(doc["results"], doc["sweeps"], doc["cores"], doc["threads"])
         print(text)
-        (out / "quality.json").write_text(json.dumps(doc, indent=1))
+        (out / "quality.json").write_text(json.dumps(doc, indent=1, allow_nan=False))
         (out / "quality.md").write_text(text + "\n")
         return 0
     if args.references_only:
@@ -630,7 +630,7 @@ def main(argv=None):
     print(text, flush=True)
     doc = {"cores": os.cpu_count(), "threads": numba.get_num_threads(), "config": cfg,
            "seconds": time.perf_counter() - t_start, "compositor_check": check, "results": results, "sweeps": sweeps}
-    (out / "quality.json").write_text(json.dumps(doc, indent=1))
+    (out / "quality.json").write_text(json.dumps(doc, indent=1, allow_nan=False))
     (out / "quality.md").write_text(text + "\n")
     log(f"wrote {out / 'quality.json'}")
     return 0

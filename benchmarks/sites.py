@@ -85,7 +85,7 @@ def main(argv=None):
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"scene": args.scene, "cores": os.cpu_count(), "reference_photons": args.reference,
-                               "rows": rows, "summary": summary}, indent=1))
+                               "rows": rows, "summary": summary}, indent=1, allow_nan=False))
     print(f"wrote {out}")
 
 

@@ -199,7 +199,7 @@ def main(argv=None) -> int:
           f"load average {load[0]:.2f} -> {load[1]:.2f}")
     args.json.write_text(json.dumps({"benchmark": "trace", "environment": environment(threads),
                                      "photons": photons, "repeats": repeats, "load_average": load,
-                                     "results": rows}, indent=2))
+                                     "results": rows}, indent=2, allow_nan=False))
     print(f"wrote {args.json}")
     return 0
 

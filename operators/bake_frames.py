@@ -39,6 +39,7 @@ class FramesBlenderJob(BakeJob):
                             "or choose an absolute folder")
         from ..detp_bake.lightmap import images
         images.check_writable_dir(self.out_dir)
+        cluster = common.cluster(context)  # the preferences' Dask scheduler: connected by the job's worker
         scenes = {}
         t0 = time.perf_counter()
         try:
@@ -61,7 +62,6 @@ class FramesBlenderJob(BakeJob):
         names = {o.name for scene in scenes.values() for o in scene.objects}
         moving = [n for n in self.moving if n in names]  # overrides on lights, empties, ... say nothing
         static = [n for n in self.static if n in names]
-        cluster = common.cluster(context)  # the preferences' Dask scheduler: connected by the job's worker
         self.job = job_mod.FramesJob(scenes.__getitem__, self.frame_range, self.settings, self.out_dir,
                                      moving=moving, static=static, export_seconds=self.export_seconds,
                                      cluster=cluster if hasattr(cluster, "client") else None)
@@ -82,7 +82,7 @@ class FramesBlenderJob(BakeJob):
             "estimator": self.settings.estimator, "photons": last["photons"], "segments": last["segments"],
             "objects": len(r.files[r.frames[-1]]), "seconds": last["seconds"], "noise": last["noise"],
             "stopped_by": last["stopped_by"], "frames": r.frames, "output_directory": self.out_dir,
-            "files": r.files[r.frames[-1]]})
+            "files": r.files[r.frames[-1]]}, allow_nan=False)
         for warning in self.warnings:
             report({"WARNING"}, warning)
         done = f"{len(r.frames)} of {len(self.frame_range.frames())} frames" if r.cancelled else f"{len(r.frames)} frames"

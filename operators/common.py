@@ -20,8 +20,23 @@ def cluster(context):
     address = prefs.scheduler_address.strip() if prefs is not None else ""
     if not address:
         return contextlib.nullcontext()
+    check_online(address)
     from ..detp_bake.run.distributed import Cluster
     return Cluster(address)
+
+
+def check_online(address: str) -> None:
+    """A scheduler on another machine is the network (the manifest's `network` permission): only
+    with Blender's Allow Online Access on (BakeError saying where to turn it on otherwise). One on
+    this machine (127.0.0.1, localhost, ::1) needs no network."""
+    from urllib.parse import urlsplit
+    host = urlsplit(address if "://" in address else f"//{address}").hostname or ""
+    if host.startswith("127.") or host in ("localhost", "::1"):
+        return
+    if not getattr(bpy.app, "online_access", True):
+        from ..detp_bake.errors import BakeError
+        raise BakeError(f"the Dask scheduler {address} of the preferences needs Allow Online Access "
+                        "(Preferences › System › Network), or clear the scheduler address to bake here")
 
 
 def bake_settings(context, estimator=None) -> BakeSettings:

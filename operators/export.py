@@ -6,7 +6,7 @@ import bpy
 from bpy.props import StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from ..detp_bake.blender import gltf
+from ..detp_bake.blender import gltf, identity
 from ..detp_bake.errors import BakeError
 from . import common
 
@@ -43,6 +43,7 @@ class DETPBAKE_OT_export_gltf(bpy.types.Operator, ExportHelper):
         out_dir, estimator = last_bake(context)
         meshes = [o for o in context.scene.objects if o.type == "MESH"]
         try:
+            identity.check_lightmaps(context.scene, out_dir)  # this scene's lightmaps, of its geometry as it is
             done = gltf.export_gltf(context.scene, out_dir, self.filepath, estimator, common.uv_layers(meshes),
                                     log=lambda message: None)
         except BakeError as exc:

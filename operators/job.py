@@ -58,6 +58,7 @@ class BlenderJob:
             raise BakeError("setting 'output_directory' is relative to the .blend: save the file first "
                             "or choose an absolute folder")
         images.check_writable_dir(self.out_dir)
+        cluster = common.cluster(context)  # the preferences' Dask scheduler: connected by the job's worker
         t0 = time.perf_counter()
         try:
             scene = common.export(context, [self.bl_scene.objects[n] for n in self.objects],
@@ -66,7 +67,6 @@ class BlenderJob:
             blender.remove_uv_layers(self.bl_scene, self.created_uv)
             raise
         self.export_seconds = time.perf_counter() - t0
-        cluster = common.cluster(context)  # the preferences' Dask scheduler: connected by the job's worker
         # A bake keeps the lightmaps of objects unchanged since the last bake into the same folder
         # (incremental.py), as the command line does, unless Rebake All says otherwise.
         self.job = job_mod.Job(scene, self.settings, self.out_dir, self.names, export_seconds=self.export_seconds,
@@ -167,7 +167,7 @@ class BakeJob(BlenderJob):
             report({"WARNING"}, warning)
         if r is None:
             s.last_report = json.dumps({"estimator": self.settings.estimator, "objects": len(files), "files": files,
-                                        "reused": sorted(reused), "output_directory": self.out_dir})
+                                        "reused": sorted(reused), "output_directory": self.out_dir}, allow_nan=False)
             report({"INFO"}, f"All {len(files)} lightmaps unchanged since the last bake into {self.out_dir}: kept")
             return {"FINISHED"}
         summary = r.report()
@@ -176,7 +176,7 @@ class BakeJob(BlenderJob):
                                     "seconds": summary["seconds"], "files": files, "reused": sorted(reused),
                                     "noise": summary["noise"], "stopped_by": summary["stopped_by"],
                                     "charts": {o["name"]: o["charts"] for o in summary["objects"] if "charts" in o},
-                                    "output_directory": self.out_dir})
+                                    "output_directory": self.out_dir}, allow_nan=False)
         total = sum(v for k, v in r.seconds.items() if k != "rasterise")
         report({"INFO"}, f"Baked {len(r.files)} lightmaps with {r.settings.estimator} in {total:.1f} s "
                          f"({summary['photons']:,} photons) to {self.out_dir}{kept}")

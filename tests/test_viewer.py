@@ -217,3 +217,42 @@ def test_viewer_shows_what_blender_renders(tmp_path, bpy):
         assert peak < 0.99, f"{name}: Blender's render clips there (the test would compare nothing)"
         diff = np.abs(w - b) / b.max()
         assert diff.max() < TOLERANCE, f"{name}: viewer {w.round(4)}, Blender {b.round(4)} ({diff.max():.1%} apart)"
+
+
+def test_make_viewers_server_serves_the_viewer_and_the_model_only(tmp_path):
+    """viewer/serve.py (what `make viewer` runs): the page, its three.js module and the one model
+    are there; the repository's .git/config, other files, folders and a way out by '..' are 404."""
+    import urllib.error
+    import urllib.request
+    sys.path.insert(0, str(ROOT / "viewer"))
+    try:
+        import serve
+    finally:
+        sys.path.pop(0)
+    model = tmp_path / "scene.glb"
+    model.write_bytes(b"glTF model bytes")
+    (tmp_path / "secret.txt").write_text("not served")
+    httpd = serve.server(0, str(model))
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    base = f"http://127.0.0.1:{httpd.server_address[1]}"
+
+    def status(path):
+        try:
+            with urllib.request.urlopen(base + path, timeout=10) as reply:
+                return reply.status, reply.read()
+        except urllib.error.HTTPError as exc:
+            return exc.code, b""
+    try:
+        code, page = status("/viewer/index.html")
+        assert code == 200 and b"importmap" in page
+        assert status("/model/scene.glb") == (200, b"glTF model bytes")
+        if (ROOT / "viewer" / "node_modules" / "three").is_dir():
+            assert status("/viewer/node_modules/three/build/three.module.js")[0] == 200
+        for path in ("/.git/config", "/viewer/../.git/config", "/viewer/%2e%2e/.git/config", "/README.md",
+                     "/viewer/", "/viewer/serve.py", "/viewer/package.json", "/model/secret.txt", "/model/",
+                     "/viewer/node_modules/three/package.json", "/viewer/node_modules/three/build/../package.json",
+                     "/sample_scenes/cornell_box.blend", "/"):
+            assert status(path)[0] == 404, path
+    finally:
+        httpd.shutdown()
+        httpd.server_close()

@@ -219,9 +219,10 @@ class DETPBAKE_PT_stats(_Panel, bpy.types.Panel):
             col.label(text=f"{len(r['reused'])} unchanged since the last bake: kept")
         if "photons" in r:
             col.label(text=f"{r['photons']:,} photons, {r['segments']:,} segments")
-        if r.get("noise"):
-            worst = max(r["noise"], key=r["noise"].get)
-            col.label(text=f"Noise: {r['noise'][worst]:.2g} % at most ({worst})")
+        measured = {name: v for name, v in (r.get("noise") or {}).items() if v is not None}
+        if measured:  # per cent of the scene's mean irradiance (None: not measured, a small bake)
+            worst = max(measured, key=measured.get)
+            col.label(text=f"Noise: {measured[worst]:.2g} % at most ({worst})")
         if r.get("charts"):  # the most fragmented lightmap: its charts, their median width, border texels
             name, c = min(r["charts"].items(), key=lambda item: item[1]["median_width"])
             col.label(text=f"Charts: {c['count']:,} in '{name}', {c['median_width']:.1f} texels wide, "

@@ -57,6 +57,8 @@ class DETPBAKE_OT_test_cluster(bpy.types.Operator):
             self.report({"ERROR"}, "set the Dask scheduler address first")
             return {"CANCELLED"}
         try:
+            from ..operators.common import check_online
+            check_online(address)
             with Cluster(address, timeout=options.CONNECT_TIMEOUT) as cluster:
                 info = cluster.describe()
         except BakeError as exc:

@@ -121,7 +121,7 @@ def pack(bl_scene, objects, layers: dict, settings, log, created=None) -> dict:
     for obj in objects:
         _write(obj, loops[obj.name], packing.objects[obj.name].uvs, created)
     out = {name: (packing.name(placed.atlas), packing.sizes[placed.atlas]) for name, placed in packing.objects.items()}
-    bl_scene[STATE] = json.dumps({"hash": digest, "atlas": out})
+    bl_scene[STATE] = json.dumps({"hash": digest, "atlas": out}, allow_nan=False)
     sides = ", ".join(f"{s}²" for s in packing.sizes)
     log(f"atlas: {len(objects)} objects packed into {packing.count} atlas{'es' if packing.count > 1 else ''} "
         f"({sides}) at {settings.texel_density:g} texels per metre")

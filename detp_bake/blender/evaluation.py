@@ -378,14 +378,15 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = T
     """World-space arrays, one BakeObject per owner (an object, or all instances of one instancer),
     the export statistics, and the scene's textures and per-triangle texture and opacity arrays
     (materials.TextureTable.finish). Raises BakeError past `max_bytes` before building anything big, and
-    for a bake target without faces (`strict`; otherwise it is just not baked)."""
+    for a bake target without faces of any area (`strict`; otherwise it is not baked, and listed in
+    the statistics' "no_area")."""
     top = _largest(c, max_bytes)
     groups: dict = {}
     for rec in c.records:
         groups.setdefault((rec[0], rec[4]), []).append(rec)
     pos, nrm, uvs, alb, emi, objs, surf = [], [], [], [], [], [], []
     table = TextureTable()
-    first, names = 0, set()
+    first, names, no_area = 0, set(), []
     instances = instanced_tris = 0
     for (owner, bake), recs in groups.items():
         start = first
@@ -412,8 +413,9 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = T
                 instances += n_inst
                 instanced_tris += int(keep.sum())
         if bake and first == start and strict:
-            raise BakeError(f"object '{owner}' has no faces to bake")
+            raise BakeError(f"object '{owner}' has no faces to bake: all its faces have zero area")
         if first == start:
+            no_area += [owner] if bake else []
             continue
         name = owner
         while name in names:
@@ -439,6 +441,7 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = T
         "instanced_lights": c.instanced_lights,
         "largest": top,
         "left_out": c.left_out,
+        "no_area": no_area,
     }
     surfaces = table.finish(surf)
     stats["textures"] = len(table.images)

@@ -14,6 +14,7 @@ from .evaluation import Collector, flatten, holdout, instancers, render_evaluati
 from .materials import Surface, read_surface
 from .world import export_world
 from .atlas import ATLAS_UV, pack as atlas_pack
+from .identity import fingerprints
 from .uv import ensure_lightmap_uv
 
 
@@ -28,12 +29,28 @@ def material_albedo_emission(mat) -> tuple[np.ndarray, np.ndarray]:
     return s.albedo, s.emission
 
 
+def _non_finite_vertices(mesh) -> int:
+    """How many of the mesh's vertices have a NaN or infinite coordinate (one array read, no loop)."""
+    co = np.empty(len(mesh.vertices) * 3, np.float64)
+    mesh.vertices.foreach_get("co", co)
+    return int((~np.isfinite(co.reshape(-1, 3))).any(axis=1).sum())
+
+
 def _unbakeable(obj) -> str:
-    """Why a mesh object can have no lightmap ('' when it can): no faces, or flattened by a zero
-    scale (it still takes part in the light transport as what it is: nothing, or a flat sheet)."""
+    """Why a mesh object can have no lightmap ('' when it can): no faces, vertices that are not
+    finite numbers (their faces would be dropped in silence), a transform that is not finite, or
+    flattened by a zero scale (it still takes part in the light transport as what it is: nothing,
+    or a flat sheet)."""
     if len(obj.data.polygons) == 0:
         return "no faces, only loose vertices or edges"
-    m = np.array(obj.matrix_world, float)[:3, :3]
+    bad = _non_finite_vertices(obj.data)
+    if bad:
+        return (f"{bad} of its {len(obj.data.vertices)} vertices {'is' if bad == 1 else 'are'} not finite "
+                "(NaN or infinite coordinates): fix or delete them")
+    m = np.array(obj.matrix_world, float)
+    if not np.isfinite(m).all():
+        return "its transform is not finite (NaN or infinite location, rotation or scale)"
+    m = m[:3, :3]
     if abs(np.linalg.det(m)) <= 1e-12 * max(np.abs(m).max(), 1e-30) ** 3:
         return "flattened by a zero scale"
     return ""
@@ -48,7 +65,8 @@ def scene_bounces(bl_scene) -> int:
 
 
 def _targets(bl_scene, view_layer, objects, log) -> list:
-    """The objects to bake: every rendered mesh that can take a lightmap (others said through `log`)
+    """The objects to bake: every rendered mesh that can take a lightmap (others said through `log`,
+    the exporter's `warn`)
     when `objects` is None, else the named ones, each checked (BakeError naming the first that cannot)."""
     rendered = rendered_names(view_layer)
     if objects is None:
@@ -88,7 +106,8 @@ def _targets(bl_scene, view_layer, objects, log) -> list:
 
 def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = None,
                  uv_layer=None, resolution=0, log: Callable[[str], None] = print,
-                 created: Optional[list] = None, max_bytes: Optional[int] = None, atlas=None) -> Scene:
+                 created: Optional[list] = None, max_bytes: Optional[int] = None, atlas=None,
+                 warn: Optional[Callable[[str], None]] = None) -> Scene:
     """The scene as F12 renders it (`render_evaluation`): every rendered mesh, curve, surface, text
     and metaball, and every instance of one, is geometry in world space; `objects` (default: every
     rendered mesh object) get lightmaps, and must be real mesh objects. `depsgraph` only names the
@@ -100,9 +119,11 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
     bake can remove it again). `resolution` is one size for all or {object name: size}.
     `max_bytes` limits the flattened geometry (BakeError naming the biggest contributors). `atlas`:
     the BakeSettings of a bake into atlases (lightmaps 'atlas'): the objects' islands are packed
-    (blender/atlas.py) and baked through the atlas UV layer, at the atlas size."""
+    (blender/atlas.py) and baked through the atlas UV layer, at the atlas size. `warn` (default
+    `log`) says the meshes that get no lightmap when every mesh is baked (report.json keeps them)."""
+    warn = log if warn is None else warn  # (a list of warnings that is callable can be empty)
     view_layer = depsgraph.view_layer if depsgraph is not None else bpy.context.view_layer
-    targets = _targets(bl_scene, view_layer, objects, log)
+    targets = _targets(bl_scene, view_layer, objects, warn)
     if not targets:
         raise BakeError(f"scene '{bl_scene.name}' has no rendered mesh object to bake")
     named = uv_layer if isinstance(uv_layer, dict) else {o.name: uv_layer for o in targets if uv_layer}
@@ -131,16 +152,21 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
         if name not in collector.found:
             if objects is not None:
                 raise BakeError(f"object '{name}' is not in the render (F12 does not show it), so it cannot be baked")
-            log(f"object '{name}' is not in the render (F12 does not show its own faces): not baked")
+            warn(f"object '{name}' is not in the render (F12 does not show its own faces): not baked")
     for reason, names in collector.left_out.items():
         log(f"left out ({reason}): {', '.join(names[:5])}" + (f" and {len(names) - 5} more" if len(names) > 5 else ""))
     (pos, nrm, uvs, alb, emi), objs, stats, surfaces = flatten(collector, resolution, max_bytes,
                                                                 strict=objects is not None)
+    for name in stats.pop("no_area", []):
+        warn(f"no lightmap for '{name}': all its faces have zero area")
     world, world_map = export_world(bl_scene.world, log)
     for obj in objs:
         obj.image = in_atlas[obj.name][0] if obj.name in in_atlas else ""
     scene = Scene(positions=pos, normals=nrm, uvs=uvs, albedo=alb, emission=emi, objects=objs,
                   lights=collector.lights, world=world, default_bounces=scene_bounces(bl_scene),
                   world_map=world_map, **surfaces)
+    baked = {o.name for o in objs if o.bake}
+    stats["geometry"] = fingerprints(o for o in targets if o.name in baked)  # for the glTF export (identity.py)
+    stats["file"] = bpy.data.filepath
     scene.export_stats = stats
     return scene

@@ -95,7 +95,7 @@ def _wire(mat, image, uv_name: str, frames: Optional[tuple] = None, l1: Optional
     nt.links.new(mix.outputs[2], emit.inputs["Color"])
     nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
     out.is_active_output = True
-    mat[REVERT_KEY] = json.dumps({"active_outputs": previous})
+    mat[REVERT_KEY] = json.dumps({"active_outputs": previous}, allow_nan=False)
 
 
 def unwire(mat) -> None:
@@ -160,7 +160,7 @@ def apply_lightmap(obj, image, uv_name: str, shared: bool = False, frames: Optio
         record["slots"].append(entry)
         if mat.node_tree.nodes.get(FRAME_NAME) is None:
             _wire(mat, image, uv_name, frames, l1)
-    obj[REVERT_KEY] = json.dumps(record)
+    obj[REVERT_KEY] = json.dumps(record, allow_nan=False)
 
 
 def revert(obj) -> bool:

@@ -20,6 +20,7 @@ from .. import __version__, options
 from ..run import bake as bake_mod, frames, interrupt, job as job_mod
 from ..run.distributed import Cluster
 from ..run.memory import geometry_budget
+from ..run.results import NOISE_UNIT
 from ..lightmap import images
 from . import output
 from ..errors import BakeCancelled, BakeError
@@ -144,7 +145,7 @@ def _open_scene(args, settings, bl_scene, warn=output.log):
     created = []
     scene = blender.export_scene(bl_scene, None, args.objects, args.uv_layer, settings.resolution, _log,
                                  created, max_bytes=geometry_budget(settings.memory_budget_mb) or None,
-                                 atlas=settings)
+                                 atlas=settings, warn=warn)
     _warn_created(args, created, warn)
     _log(f"exported {scene.triangle_count} triangles, {len(scene.lights)} lights; "
          f"baking {sum(o.bake for o in scene.objects)} objects")
@@ -256,10 +257,9 @@ def run_compare(args, bl_scene=None, cancel=None) -> dict:
 def _log_noise(result) -> None:
     if result.stopped_by != "photons":
         _log(f"stopped by {result.stopped_by.replace('_', ' ')} after {result.stats.photons:,} photons")
-    if result.noise:
-        worst = sorted(result.noise.items(), key=lambda kv: -kv[1])
-        _log("relative noise: " + ", ".join(f"{name} {100 * v:.2g} %" for name, v in worst[:8]) +
-             (f" (+{len(worst) - 8} more in report.json)" if len(worst) > 8 else ""))
+    line = output.noise_line(result.noise, result.noise_unmeasured, result.noise_unit != NOISE_UNIT)
+    if line:
+        _log(line)
 
 
 def run_bake(args, bl_scene=None, cancel=None) -> dict:
@@ -298,7 +298,7 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
             "estimator": settings.estimator, "photons": result.stats.photons if result is not None else 0,
             "stopped_by": result.stopped_by if result is not None else "reused",
             "reused": list(done.reused),
-            "noise": {n: round(100.0 * v, 3) for n, v in (result.noise.items() if result is not None else ())},
+            "noise": result.noise_percent() if result is not None else {},
             "warnings": list(result.warnings) if result is not None else list(warn)}
 
 
@@ -329,7 +329,7 @@ def run_export_gltf(args, bl_scene=None, cancel=None) -> dict:
     if not (Path(args.lightmaps) / "report.json").is_file():
         raise BakeError(f"no report.json in '{args.lightmaps}': give the output folder of a bake (--lightmaps)")
     try:
-        from ..blender import files as blend_files, gltf
+        from ..blender import files as blend_files, gltf, identity
     except ImportError as exc:
         if exc.name != "bpy":
             raise
@@ -337,6 +337,7 @@ def run_export_gltf(args, bl_scene=None, cancel=None) -> dict:
     gltf.lightmap_files(args.lightmaps, args.estimator)  # a bad report is named before the scene is opened
     if bl_scene is None:
         bl_scene = blend_files.open_blend(Path(args.scene))
+    identity.check_lightmaps(bl_scene, args.lightmaps)  # this file's lightmaps, of its geometry as it is
     _check_cancel(cancel)
     done = gltf.export_gltf(bl_scene, args.lightmaps, args.out, args.estimator, args.uv_layer, _log)
     return {"command": "export-gltf", **done}

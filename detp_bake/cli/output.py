@@ -56,10 +56,32 @@ class Warnings(list):
         log(f"warning: {msg}")
 
 
+def percent(fraction: float) -> str:
+    """A fraction as per cent in plain digits: 0.031 → '3.1', 2.5 → '250' (never '2.5e+02')."""
+    p = 100.0 * fraction
+    return f"{p:.0f}" if abs(p) >= 10.0 else f"{p:.2g}"
+
+
+def noise_line(noise: dict, unmeasured: str, fixed: bool = False) -> str:
+    """The bake's noise in one line: the worst lightmaps first, what the figure is relative to and
+    what lowers it; or why it was not measured ('' when there is nothing to say)."""
+    if unmeasured:
+        return f"noise not measured: {unmeasured}"
+    if not noise:
+        return ""
+    worst = sorted(noise.items(), key=lambda kv: -kv[1])
+    listed = ", ".join(f"{name} {percent(v)} %" for name, v in worst[:8]) + \
+        (f" (+{len(worst) - 8} more in report.json)" if len(worst) > 8 else "")
+    if fixed:
+        return f"noise: {listed} of each texel's value (the photon map's is fixed by --k: a larger k lowers it)"
+    return (f"noise: {listed} of the scene's mean irradiance (RMS over each lightmap's texels); more photons "
+            "(--photons) or a noise target (--target-noise PERCENT) lower it")
+
+
 def written(summary: dict, as_json: bool = False) -> None:
     """The run's result on stdout: every file written, one a line, or the summary as JSON."""
     if as_json:
-        print(json.dumps(summary, indent=2, default=str), flush=True)
+        print(json.dumps(summary, indent=2, default=str, allow_nan=False), flush=True)
         return
     for path in _paths(summary.get("files", {})):
         print(path)

@@ -5,8 +5,10 @@ estimator's sums after each group of batches, differenced, give independent esti
 indirect irradiance, each from a share w_g of the photons. Their variance falls as 1/w, so with
 W = Σ w_g and X = Σ w_g·x_g / W (the bake's own estimate), the variance of X at a texel is
 Σ w_g (x_g − X)² / ((G − 1)·W): no extra tracing, two running sums per texel. A lightmap's relative
-noise is the RMS of that standard deviation over its texels, over its mean irradiance (direct light
-included: that is what the user sees). Sampled direct light has its own, much smaller, noise, which
+noise is the RMS of that standard deviation over its texels, over the mean irradiance of the whole
+bake (direct light included: that is what the user sees). Over the lightmap's own mean, a dim lamp
+shade or one of a thousand small crates read hundreds of per cent, which says nothing the user can
+act on; over the scene's light, it says how visible the noise is beside the rest. Sampled direct light has its own, much smaller, noise, which
 this leaves out.
 """
 from __future__ import annotations
@@ -64,17 +66,32 @@ class BatchNoise:
         return spread / ((self.groups - 1) * self.weight)
 
     def relative(self, lightmaps, luminance, chunk: int = 1 << 20) -> dict:
-        """{object name: relative noise} of each lightmap. `luminance(start, stop)`: the full
-        estimate's (direct + indirect) mean over channels at texels start:stop, float64, which the
-        noise is relative to. Chunk by chunk: no temporaries the size of the bake (at 2048² the
-        noise is read after every block of batches, and a whole-bake float64 RGB copy is 80 MB)."""
-        out = {}
+        """{object name: relative noise} of each lightmap: the RMS over its texels of the standard
+        deviation, over the mean irradiance of every texel of the bake (the scene's light), so that
+        a dim object's noise is not magnified by its own darkness, nor a small object's by its
+        few texels. Empty when it cannot be measured (`unmeasured` says why). `luminance(start,
+        stop)`: the full estimate's (direct + indirect) mean over channels at texels start:stop,
+        float64. Chunk by chunk: no temporaries the size of the bake (at 2048² the noise is read
+        after every block of batches, and a whole-bake float64 RGB copy is 80 MB)."""
+        if self.groups < 2:
+            return {}
+        spreads, level, count = {}, 0.0, 0
         for lm in lightmaps:
-            spread = level = 0.0
+            spread = 0.0
             for start in range(lm.offset, lm.offset + lm.count, chunk):
                 stop = min(start + chunk, lm.offset + lm.count)
                 spread += float(self.variance(start, stop).sum())
                 level += float(np.sum(luminance(start, stop)))
-            mean = level / lm.count if lm.count else 0.0
-            out[lm.name] = float(np.sqrt(spread / lm.count) / mean) if mean > 0.0 else 0.0
-        return out
+            spreads[lm.name] = (spread, lm.count)
+            count += lm.count
+        mean = level / count if count else 0.0
+        if not mean > 0.0:
+            return {}
+        return {name: float(np.sqrt(spread / n) / mean) if n else 0.0 for name, (spread, n) in spreads.items()}
+
+    def unmeasured(self, photons: int) -> str:
+        """Why `relative` is empty after a bake of `photons` photons."""
+        if self.groups < 2:
+            return (f"the {photons:,} photons were traced in one block, and the noise is read from the spread "
+                    "between blocks: trace more photons to have it measured")
+        return "the scene's mean irradiance is zero: there is no light to measure the noise against"

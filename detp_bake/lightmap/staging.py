@@ -5,12 +5,72 @@ final rename is atomic on every platform); `commit` renames them all at the end.
 before that (a cancel, a full disk, a bug) removes every temporary file, including one that was
 being written when it failed, so a bake never leaves a `.…partial…` file or a 0-byte image behind,
 and files already in the folder are only ever replaced by complete ones.
+
+A process killed outright (SIGKILL, a power cut) cleans nothing: its temporaries carry its process
+id, and the next bake into the folder removes those whose process is gone (`remove_stale`), never
+one of a bake still writing there.
 """
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 from typing import Callable
+
+# The temporary names this module (and report.json's writers) give, `temporary`, and the folder
+# probe of images.check_writable_dir: each holds the writer's process id.
+_OURS = re.compile(r"\.(?:.+\.(\d+)\.partial(?:\.[A-Za-z0-9]+)?|detp_bake_probe_(\d+))")
+
+
+def temporary(target: Path) -> Path:
+    """The hidden name `target` is written under until it is complete: .<stem>.<pid>.partial.<ext>."""
+    base, dot, ext = target.name.rpartition(".")
+    name = f".{base}.{os.getpid()}.partial.{ext}" if dot else f".{target.name}.{os.getpid()}.partial"
+    return target.with_name(name)
+
+
+def _alive(pid: int) -> bool:
+    """Whether process `pid` runs (when in doubt, yes: a live bake's file is never removed)."""
+    if pid == os.getpid():
+        return True
+    if os.name == "nt":  # os.kill(pid, 0) would end the process there
+        import ctypes
+        kernel32 = ctypes.WinDLL("kernel32", use_last_error=True)
+        handle = kernel32.OpenProcess(0x1000, False, pid)  # PROCESS_QUERY_LIMITED_INFORMATION
+        if not handle:
+            return ctypes.get_last_error() != 87  # ERROR_INVALID_PARAMETER: no such process
+        code = ctypes.c_ulong()
+        ok = kernel32.GetExitCodeProcess(handle, ctypes.byref(code))
+        kernel32.CloseHandle(handle)
+        return not ok or code.value == 259  # STILL_ACTIVE
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process: alive
+        return True
+    return True
+
+
+def remove_stale(folder: str | os.PathLike) -> list[str]:
+    """Remove the temporaries of processes that are gone from `folder` (only names this project
+    gives, see `_OURS`; nothing else is touched); the names removed."""
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:  # no folder yet: nothing to clean
+        return removed
+    for entry in sorted(entries, key=lambda e: e.name):
+        match = _OURS.fullmatch(entry.name)
+        if match is None or not entry.is_file(follow_symlinks=False):
+            continue
+        if not _alive(int(match.group(1) or match.group(2))):
+            try:
+                os.unlink(entry.path)
+                removed.append(entry.name)
+            except OSError:
+                pass  # gone already, or not ours to remove
+    return removed
 
 
 class FileSet:
@@ -23,8 +83,7 @@ class FileSet:
     def stage(self, name: str, write: Callable[[Path], None]) -> Path:
         """Call `write(temporary path)` for the file `name` in the folder; returns the target."""
         target = self.folder / name
-        base, dot, ext = name.rpartition(".")
-        tmp = self.folder / (f".{base}.{os.getpid()}.partial.{ext}" if dot else f".{name}.{os.getpid()}.partial")
+        tmp = temporary(target)
         self.staged.append((tmp, target))  # before writing: a write that fails half-way is removed too
         try:
             write(tmp)

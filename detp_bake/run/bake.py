@@ -403,8 +403,9 @@ class _Pipeline:
                    "build": self.build[name], "trace": self.tracer.stats.seconds, "estimate": self.spent[name]}
         # The noise sums go before the images are made (two float32s a texel).
         noise = self.noise.pop(name, None)
-        if noise is not None:
-            noise = noise.relative(self.at.lightmaps, partial(_luminance, self.sites.of_sites(value), np.pi))
+        if noise is not None:  # (relative noise, why there is none)
+            measured = noise.relative(self.at.lightmaps, partial(_luminance, self.sites.of_sites(value), np.pi))
+            noise = measured, "" if measured else noise.unmeasured(self.tracer.stats.photons)
         self._geometry_back()
         # An estimate with white noise is denoised apart from the direct light (denoise.py). The
         # last estimator of a plain bake hands the direct light over: nothing after it reads it.
@@ -441,13 +442,17 @@ class _Pipeline:
         return result
 
     def _report_noise(self, kind, result, noise) -> None:
-        """The result's noise (`noise`: measured from its batches, or None), warnings and memory figures."""
+        """The result's noise (`noise`: measured from its batches, (relative noise, why none), or
+        None), warnings and memory figures."""
         settings, at = self.settings, self.at
         if noise is not None:
-            result.noise = noise
+            result.noise, result.noise_unmeasured = noise
         elif kind.fixed_noise(settings.estimator_settings) is not None:
             fixed = kind.fixed_noise(settings.estimator_settings)
             result.noise = {lm.name: fixed for lm in self.texels.lightmaps}
+            result.noise_unit = "per cent of each texel's own value (fixed by k)"
+        else:
+            result.noise_unmeasured = f"the {settings.estimator} estimator's noise is not read off its batches"
         result.warnings.extend(layout_warnings(at, settings.estimator_settings, self.radius if kind.discs else None))
         result.direct["indirect_spacing"] = self.sites.spacing
         result.direct["indirect_sites"] = len(at)

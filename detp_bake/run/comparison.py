@@ -87,6 +87,6 @@ def report_files(results: dict, names: list) -> tuple[dict, dict]:
             section["difference_to_reference"] = diffs[name]
             sections[name] = section
         path.write_text(json.dumps({**summary, "files": {n: results[n].files for n in names},
-                                    "image": "compare.png", "sections": sections}, indent=2))
+                                    "image": "compare.png", "sections": sections}, indent=2, allow_nan=False))
 
     return summary, {"compare.png": lambda path: images.write_png(path, picture), "compare.json": compare_json}

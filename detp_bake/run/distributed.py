@@ -43,6 +43,7 @@ AHEAD_PER_SLOT = 2  # units submitted ahead of the one the client adds next, per
 RESEND = 3  # times a unit the scheduler dropped (its worker died with the bake's only copy) is sent again
 MEMORY_SHARE = 0.6  # of a worker's memory limit a unit may plan to use
 CORE = "detp_bake"  # the core's package name on the workers
+LOCAL_HOST = "127.0.0.1"  # what a local cluster (--workers) listens on
 _PREFIX = __name__.rsplit(".", 2)[0]  # the core's package name here ("detp_bake" or bl_ext.….detp_bake): run/'s parent
 
 
@@ -85,8 +86,11 @@ class Cluster:
             if self.scheduler:
                 self.client = Client(self.scheduler, timeout=self.timeout, set_as_default=False)
             else:
+                # Loopback only, every port (scheduler, nannies, workers, the scheduler's HTTP
+                # endpoint on any free port): workers on this machine need no network.
                 self.local = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                          dashboard_address=":0")  # any free port: never clash
+                                          host=LOCAL_HOST, dashboard_address=f"{LOCAL_HOST}:0",
+                                          worker_dashboard_address=None)
                 self.client = Client(self.local, timeout=self.timeout, set_as_default=False)
             self.client.wait_for_workers(1, timeout=self.timeout)
         except (OSError, TimeoutError) as exc:

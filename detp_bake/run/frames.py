@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import __version__
 from . import bake as bake_mod
-from ..lightmap import images
+from ..lightmap import images, staging
 from .incremental import digest as _digest, lights_signature, object_signatures  # noqa: F401  (frames' keys)
 from ..errors import BakeCancelled, BakeError
 from ..estimators import FrameState
@@ -297,6 +297,6 @@ def _write_report(result: FramesResult, frames: FrameRange, settings: dict, eval
            "estimator": estimator,
            "seconds": {"evaluate": evaluate_seconds, "total": total_seconds},
            "per_frame": result.sections}
-    tmp = result.report_path.with_name(".report.partial.json")
-    tmp.write_text(json.dumps(doc, indent=2))
+    tmp = staging.temporary(result.report_path)
+    tmp.write_text(json.dumps(doc, indent=2, allow_nan=False))
     os.replace(tmp, result.report_path)

@@ -33,7 +33,7 @@ from typing import Iterable, Optional
 import numpy as np
 
 from .. import __version__
-from ..lightmap import denoise
+from ..lightmap import denoise, staging
 from .bake import disc_reach
 from ..scene import Scene, SunLight
 
@@ -224,7 +224,7 @@ def write_all_reused(plan: Plan, out_dir) -> Path:
     if plan.earlier:
         doc["earlier_objects"] = plan.earlier
     target = Path(out_dir) / "report.json"
-    tmp = target.with_name(".report.partial.json")
-    tmp.write_text(json.dumps(doc, indent=2))
+    tmp = staging.temporary(target)
+    tmp.write_text(json.dumps(doc, indent=2, allow_nan=False))
     os.replace(tmp, target)
     return target

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Iterator, Optional
 
 from . import bake as bake_mod, comparison, frames, incremental
-from ..lightmap import images
+from ..lightmap import images, staging
 from ..transport import photons
 from ..errors import BakeCancelled, BakeError
 
@@ -299,6 +299,7 @@ class Job:
                                sum(o.bake for o in self.scene.objects) if self.scene is not None else 0))
             for message in self._warnings:
                 self._send(Notice(message))
+            self._remove_stale()
             outcome = self._compute()
         except BakeCancelled:
             outcome = Cancelled(self.phase)
@@ -313,6 +314,15 @@ class Job:
             _lock.release()
         self.outcome = outcome
         self._send(outcome)
+
+    def _remove_stale(self) -> None:
+        """The temporaries a killed bake left in the output folder go (staging.remove_stale), said."""
+        removed = staging.remove_stale(self.out_dir) if self.out_dir is not None else []
+        if removed:
+            message = (f"removed {len(removed)} temporary files an interrupted bake left in {self.out_dir}: "
+                       f"{', '.join(removed[:4])}{' …' if len(removed) > 4 else ''}")
+            self._warnings.append(message)
+            self._send(Notice(message))
 
     def _compute(self) -> Result:
         for name in self.names:

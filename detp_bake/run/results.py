@@ -48,6 +48,10 @@ class RawImages(Mapping):
         return len(self._names)
 
 
+# What a measured noise is: the spread between blocks of batches (lightmap/noise.py).
+NOISE_UNIT = "per cent of the mean irradiance over every baked texel (RMS over each lightmap's texels)"
+
+
 @dataclass
 class BakeResult:
     settings: BakeSettings
@@ -64,7 +68,9 @@ class BakeResult:
     seconds: dict
     files: dict = field(default_factory=dict)  # object name -> [paths]
     direct: dict = field(default_factory=dict)  # how direct light was found (report.json)
-    noise: dict = field(default_factory=dict)  # object name -> relative noise of its lightmap
+    noise: dict = field(default_factory=dict)  # object name -> relative noise of its lightmap, when measured
+    noise_unmeasured: str = ""  # why `noise` is empty: report.json then holds null and this reason
+    noise_unit: str = NOISE_UNIT  # what the noise is relative to
     memory: dict = field(default_factory=dict)  # the estimate made before work, and the peak used
     export: dict = field(default_factory=dict)  # what the exporter found (instances, triangles, textures, …)
     raw_images: dict = field(default_factory=dict)  # object name -> image before denoising (when denoised)
@@ -86,6 +92,11 @@ class BakeResult:
     keys: dict = field(default_factory=dict)
     reused: dict = field(default_factory=dict)
     earlier: list = field(default_factory=list)
+
+    def noise_percent(self) -> dict:
+        """{lightmap name: noise in per cent, or None where it was not measured}, for JSON."""
+        return {lm.name: round(100.0 * self.noise[lm.name], 3) if lm.name in self.noise else None
+                for lm in self.texels.lightmaps}
 
     def _entries(self, lm) -> list:
         """report.json's entries of lightmap `lm`: its object's, or one per object of an atlas
@@ -138,7 +149,9 @@ class BakeResult:
                      "escaped": st.escaped.tolist(), "truncated": st.truncated.tolist()},
             "estimator": {"name": self.settings.estimator, **self.counters},
             "direct": self.direct,
-            "noise": {name: round(100.0 * v, 3) for name, v in self.noise.items()},  # per cent
+            "noise": self.noise_percent(),
+            "noise_unit": self.noise_unit,
+            **({"noise_unmeasured": self.noise_unmeasured} if None in self.noise_percent().values() else {}),
             "stopped_by": self.stopped_by,
             "memory": self.memory,
             "export": self.export,

@@ -99,7 +99,7 @@ def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Cal
             if frame is None:  # a frame of a range: its report.json is the range's (frames.py)
                 content = next(iter(results.values())).report() if summary is None and len(results) == 1 else \
                     {"version": __version__, **(summary or {}), "estimators": {n: r.report() for n, r in results.items()}}
-                files.stage_text("report.json", json.dumps(content, indent=2))
+                files.stage_text("report.json", json.dumps(content, indent=2, allow_nan=False))
             if cancelled():
                 raise BakeCancelled()
             files.commit()
