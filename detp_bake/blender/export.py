@@ -15,7 +15,7 @@ from .materials import Surface, read_surface
 from .world import export_world
 from .atlas import ATLAS_UV, pack as atlas_pack
 from .identity import fingerprints
-from .uv import ensure_lightmap_uv
+from .uv import ensure_lightmap_uvs
 
 
 def material_surface(mat) -> Surface:
@@ -132,11 +132,10 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
         if layer is not None and layer not in obj.data.uv_layers:
             raise BakeError(f"object '{obj.name}' has no UV layer '{layer}'")
     layers = {o.name: named.get(o.name) or DEFAULT_UV for o in targets}
-    for obj in targets:
-        if ensure_lightmap_uv(obj, layers[obj.name]):
-            log(f"object '{obj.name}': created UV layer '{layers[obj.name]}' with Lightmap Pack")
-            if created is not None:
-                created.append((obj.name, layers[obj.name]))
+    for obj in ensure_lightmap_uvs(targets, layers):
+        log(f"object '{obj.name}': created UV layer '{layers[obj.name]}' with Lightmap Pack")
+        if created is not None:
+            created.append((obj.name, layers[obj.name]))
     in_atlas = {}
     if atlas is not None and atlas.lightmaps == "atlas":
         in_atlas = atlas_pack(bl_scene, targets, layers, atlas, log, created)
