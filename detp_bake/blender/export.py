@@ -132,10 +132,13 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
         if layer is not None and layer not in obj.data.uv_layers:
             raise BakeError(f"object '{obj.name}' has no UV layer '{layer}'")
     layers = {o.name: named.get(o.name) or DEFAULT_UV for o in targets}
-    for obj in ensure_lightmap_uvs(targets, layers):
-        log(f"object '{obj.name}': created UV layer '{layers[obj.name]}' with Lightmap Pack")
-        if created is not None:
-            created.append((obj.name, layers[obj.name]))
+    made = ensure_lightmap_uvs(targets, layers)
+    for layer in dict.fromkeys(layers[o.name] for o in made):  # one line per layer name, not per object
+        names = [o.name for o in made if layers[o.name] == layer]
+        log(f"created UV layer '{layer}' with Lightmap Pack on {', '.join(repr(n) for n in names[:8])}"
+            + (f" and {len(names) - 8} more objects" if len(names) > 8 else ""))
+    if created is not None:
+        created.extend((o.name, layers[o.name]) for o in made)
     in_atlas = {}
     if atlas is not None and atlas.lightmaps == "atlas":
         in_atlas = atlas_pack(bl_scene, targets, layers, atlas, log, created)

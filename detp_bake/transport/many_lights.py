@@ -7,7 +7,8 @@ flops a light). A light that gives more than LOW of the texel's total gets rays 
 direct.py would give it (the part kept sharp for point, spot and sun lights: run/finishing.py); all
 the others share `samples` rays, each drawing its light in proportion to its weight and counting
 1/probability of it (unbiased, and exact where nothing is in the way, the weights being the lights'
-own falloff). That part goes to the denoised direct light. Between LOW and HIGH a light's light is
+own falloff; a light of negative power is drawn by its magnitude). That part goes to the denoised
+direct light. Between LOW and HIGH a light's light is
 split between the two by its share, so that neither part jumps from one texel to the next where a
 light's share crosses a threshold. Cost per texel: one weight per light plus at most 1/LOW lights'
 own rays and `samples` rays; for thousands of lights a tree of lights would weigh them faster.
@@ -44,7 +45,7 @@ def many_rays(kinds, params, counts, sharp_kind, samples, key, ids, n, pos, nrm,
         gx, gy, gz = geo[i, 0], geo[i, 1], geo[i, 2]
         total = 0.0
         for q in range(m):
-            weight[q] = light_weight(kinds[q], params[q], pos[i, 0], pos[i, 1], pos[i, 2], nx, ny, nz)
+            weight[q] = abs(light_weight(kinds[q], params[q], pos[i, 0], pos[i, 1], pos[i, 2], nx, ny, nz))
             total += weight[q]
         if not total > 0.0:
             continue
