@@ -4,16 +4,18 @@ ground under a sun. Wall seconds and report.json's phases per bake; for the room
 its lightmaps against a reference bake.
 
     python benchmarks/quality_per_second.py [--lights 800] [--room-resolution 256]
-        [--objects 1500] [--crate-resolution 32] [--code DIR] [--reference DIR] [--json OUT]
+        [--objects 1500] [--crate-resolution 32] [--code DIR] [--before DIR] [--reference DIR]
+        [--json OUT]
 
 The scenes come from benchmarks/big_scenes.py (numpy and foreach_set); the crates lose their
 Lightmap UV layers (unless `--level-uvs`), so the exporter makes them. `--code` bakes with another
-checkout of the project (the state before a change, for a before/after table); `--reference`
-reuses (or writes, when missing) the reference room bake in DIR: the same room baked with
-`--reference-photons` photons and `--reference-samples` shadow rays per light with extent (its
-direct light from every light at every texel). The error is the relative RMS difference of the
-lightmaps' texels (their mean over RGB) against the reference, over every texel of the six
-surfaces. Prints a table, writes JSON (default benchmarks/results/quality_per_second.json).
+checkout of the project; `--before DIR` bakes each case with DIR's checkout too, beside it (the
+state before a change: a before/after table from one run). `--reference DIR` reuses (or writes,
+when missing) the reference room bake: the same room baked by `--reference-code` (else the first
+checkout) with `--reference-photons` photons and `--direct-samples` `--reference-samples`. The
+error is the relative RMS difference of the lightmaps' pixels (their mean over RGB) against the
+reference, over all six surfaces' images. Prints a table, writes JSON (default
+benchmarks/results/quality_per_second.json).
 """
 from __future__ import annotations
 
@@ -86,6 +88,7 @@ def main(argv=None):
     ap.add_argument("--crate-resolution", type=int, default=32)
     ap.add_argument("--level-uvs", action="store_true", help="the crates keep their Lightmap UV layers")
     ap.add_argument("--code", default=str(ROOT))
+    ap.add_argument("--before", default="", help="another checkout baked beside --code, case by case")
     ap.add_argument("--reference", default="")
     ap.add_argument("--reference-code", default="", help="the checkout that bakes the reference (--code)")
     ap.add_argument("--reference-photons", type=int, default=25_000_000)
@@ -96,6 +99,7 @@ def main(argv=None):
     os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="detp_bench_blender_"))
     import bpy
     work = Path(tempfile.mkdtemp(prefix="detp_qps_"))
+    codes = [("before", args.before), ("after", args.code)] if args.before else [("", args.code)]
     rows = []
     if "room" not in args.skip:
         many = big_scenes.lit_room(bpy, work / "room_many.blend", args.lights)
@@ -103,32 +107,43 @@ def main(argv=None):
         res = ["--resolution", str(args.room_resolution)]
         ref = Path(args.reference) if args.reference else work / "reference"
         if not (ref / "report.json").is_file():
-            report, wall = bake(args.reference_code or args.code, many, ref, res + ["--photons", str(args.reference_photons),
-                                                        "--direct-samples", str(args.reference_samples)])
-            rows.append(row(f"room, {args.lights} lights, ref", report, wall))
-        report, wall = bake(args.code, one, work / "one", res)
-        rows.append(row("room, 1 light", report, wall))
-        report, wall = bake(args.code, many, work / "many", res)
-        rows.append(row(f"room, {args.lights} lights", report, wall, error(work / "many", ref)))
+            report, wall = bake(args.reference_code or codes[0][1], many, ref,
+                                res + ["--photons", str(args.reference_photons),
+                                       "--direct-samples", str(args.reference_samples)])
+            rows.append(row(f"room, {args.lights} lights, reference", report, wall))
+        for label, code in codes:
+            report, wall = bake(code, one, work / f"one{label}", res)
+            rows.append(row(f"{label} room, 1 light".strip(), report, wall))
+            report, wall = bake(code, many, work / f"many{label}", res)
+            rows.append(row(f"{label} room, {args.lights} lights".strip(), report, wall,
+                            error(work / f"many{label}", ref)))
     if "level" not in args.skip:
-        level = big_scenes.level(bpy, work / "level.blend", args.objects)
-        if not args.level_uvs:  # the exporter makes them (Lightmap Pack), as for a level fresh from an editor
-            bpy.ops.wm.open_mainfile(filepath=str(level))
-            for mesh in bpy.data.meshes:
-                mesh.uv_layers.remove(mesh.uv_layers["Lightmap"])
-            level = work / "level_no_uvs.blend"
-            bpy.ops.wm.save_as_mainfile(filepath=str(level))
-        report, wall = bake(args.code, level, work / "level", ["--resolution", str(args.crate_resolution)])
-        rows.append(row(f"level, {args.objects} crates", report, wall))
-    doc = {"cores": os.cpu_count(), "code": str(args.code), "lights": args.lights,
+        level = _level(bpy, work, args.objects, args.level_uvs)
+        for label, code in codes:
+            report, wall = bake(code, level, work / f"level{label}", ["--resolution", str(args.crate_resolution)])
+            rows.append(row(f"{label} level, {args.objects} crates".strip(), report, wall))
+    doc = {"cores": os.cpu_count(), "code": str(args.code), "before": args.before, "lights": args.lights,
            "room_resolution": args.room_resolution, "objects": args.objects,
-           "crate_resolution": args.crate_resolution, "level_uvs": args.level_uvs, "blender": ".".join(map(str, bpy.app.version)), "rows": rows}
+           "crate_resolution": args.crate_resolution, "level_uvs": args.level_uvs,
+           "blender": ".".join(map(str, bpy.app.version)), "rows": rows}
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(doc, indent=1))
     print(f"wrote {out}")
     return doc
 
+
+def _level(bpy, work, objects, uvs) -> Path:
+    """The crates' level; without their Lightmap UV layers unless `uvs` (the exporter makes them,
+    as for a level fresh from an editor)."""
+    level = big_scenes.level(bpy, work / "level.blend", objects)
+    if uvs:
+        return level
+    bpy.ops.wm.open_mainfile(filepath=str(level))
+    for mesh in bpy.data.meshes:
+        mesh.uv_layers.remove(mesh.uv_layers["Lightmap"])
+    bpy.ops.wm.save_as_mainfile(filepath=str(work / "level_no_uvs.blend"))
+    return work / "level_no_uvs.blend"
 
 if __name__ == "__main__":
     main()
