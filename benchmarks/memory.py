@@ -60,7 +60,7 @@ def _scene(resolution: int, gutter: float = 0.05):
 
 def _child(estimator: str, resolution: int, photons: int, denoise: bool, gutter: float,
            directional: str = "none", shadowmask: bool = False) -> dict:
-    from detp_bake.run import bake, finishing, memory
+    from detp_bake.run import bake, finishing, memory, pipeline
     from detp_bake.lightmap import denoise as denoise_mod, texels
     from detp_bake.transport import direct
     from detp_bake import estimators
@@ -102,7 +102,7 @@ def _child(estimator: str, resolution: int, photons: int, denoise: bool, gutter:
         setattr(module, attr, wrapped)
 
     for module, attr, name in ((texels, "rasterise", "rasterise"), (direct, "direct_irradiance", "direct"),
-                               (texels, "tangent_clearance", "clearance"), (bake, "own_surface_rise", "rise"),
+                               (texels, "tangent_clearance", "clearance"), (pipeline, "own_surface_rise", "rise"),
                                (estimators, "create", "build"), (finishing.Finishing, "images", "images"),
                                (denoise_mod, "denoise_lightmap", "denoise")):
         step(module, attr, name)

@@ -55,6 +55,7 @@ class Option:
     estimator: bool = False
     unit: str = "NONE"
     metavar: Optional[str] = None
+    lightmaps: str = ""  # the one `lightmaps` mode this setting does anything in ('' for all)
 
     @property
     def choice_list(self) -> tuple:
@@ -149,8 +150,8 @@ OPTIONS = (
            f"light every this many texels and blend between them (0: automatic, {AUTO_SPACING} on lightmaps "
            f"of {AUTO_FROM}² and more; 1: every texel)", minimum=1, maximum=MAX_SPACING, auto=0,
            metavar="TEXELS"),
-    Option("target_noise", float, 0.0, "Noise Target", "Stop tracing once every lightmap's relative noise is at most "
-           "this many per cent (0: off); Photons is then the most to trace", minimum=0.0, maximum=100.0,
+    Option("target_noise", float, 0.0, "Noise Target", "Stop tracing once every lightmap's noise is at most this many "
+           "per cent of the scene's mean irradiance (0: off); Photons is then the most to trace", minimum=0.0, maximum=100.0,
            soft_maximum=10.0, unit="PERCENTAGE", metavar="PERCENT"),
     Option("time_limit", float, 0.0, "Time Limit", "Stop tracing before the bake has run this many seconds (0: off)",
            minimum=0.0, soft_maximum=3600.0, unit="TIME", metavar="SECONDS"),
@@ -160,7 +161,7 @@ OPTIONS = (
            "Paths › Diffuse)", minimum=0, maximum=MAX_BOUNCES, soft_maximum=16, auto=-1),
     Option("seed", int, 0, "Seed", "Random seed: the same seed gives the same lightmaps", minimum=0),
     Option("resolution", int, 128, "Resolution", "Lightmap width and height in pixels",
-           minimum=1, maximum=MAX_RESOLUTION, soft_maximum=4096),
+           minimum=1, maximum=MAX_RESOLUTION, soft_maximum=4096, lightmaps="object"),
     Option("lightmaps", str, "object", "Lightmaps", "One lightmap per object, or every object's charts packed "
            "into shared atlases at one texel density (lightmap/atlas.py)",
            choices=(("object", "Per Object", "One lightmap per object, of its own resolution"),
@@ -168,18 +169,18 @@ OPTIONS = (
                      "density: atlas_0.<estimator>.exr, …"))),
     Option("texel_density", float, 32.0, "Texels per Metre", "Lightmap texels per metre of surface: of every "
            "object in an atlas (times the object's own Density Scale), or of each object's own lightmap when "
-           "sizing by density", minimum=0.01, soft_maximum=1024.0, metavar="TEXELS"),
+           "sizing by density", minimum=0.01, soft_maximum=1024.0, metavar="TEXELS", lightmaps="atlas"),
     Option("atlas_size", int, 1024, "Atlas Size", "Width and height of each atlas in pixels; more atlases are "
-           "added as needed", minimum=16, maximum=MAX_RESOLUTION, soft_maximum=8192),
+           "added as needed", minimum=16, maximum=MAX_RESOLUTION, soft_maximum=8192, lightmaps="atlas"),
     Option("atlas_padding", int, 2, "Atlas Padding", "Empty texels between charts in an atlas (at least 2: no "
-           "texel is shared under bilinear filtering)", minimum=1, maximum=64, metavar="TEXELS"),
+           "texel is shared under bilinear filtering)", minimum=1, maximum=64, metavar="TEXELS", lightmaps="atlas"),
     Option("atlas_charts", str, "layout", "Atlas Charts", "What is packed into the atlases",
-           choices=(("layout", "Object Layouts", "Each object's lightmap UV layer as it is (made by Lightmap Pack "
+           choices=(("layout", "Object Layouts", "Each object's lightmap UV layer as it is (made with xatlas charts "
                      "where it has none), as one block, scaled to the density and placed"),
                     ("islands", "Islands", "The islands of each object's lightmap UV layer, each scaled to the "
                      "density and placed on its own"),
                     ("smart", "Smart UV", "New islands from Blender's Smart UV Project (fewer seams), placed on "
-                     "their own"))),
+                     "their own")), lightmaps="atlas"),
     Option("directional", str, "none", "Directional", "Also bake where the light comes from, for normal-mapped "
            "shading (lightmap/sh.py)",
            choices=(("none", "None", "The plain lightmap only"),
@@ -222,6 +223,22 @@ OPTIONS = (
            estimator=True),
 )
 BY_NAME = {o.name: o for o in OPTIONS}
+
+
+def unused(given, lightmaps: str) -> Optional[str]:
+    """Why settings given on the command line (`given`: their names) do nothing with `lightmaps`
+    ('object' or 'atlas'), or None. A flag that changes nothing is refused, not ignored: a person
+    who sets the atlas size expects atlases. (On the command line, per-object lightmaps are sized
+    by --resolution alone; the panel's size by density is a panel setting.)"""
+    idle = [BY_NAME[n] for n in BY_NAME if n in given and BY_NAME[n].lightmaps not in ("", lightmaps)]
+    if not idle:
+        return None
+    flags = " and ".join(o.flag for o in idle)
+    if lightmaps == "atlas":
+        return (f"{flags} does nothing with --lightmaps atlas (atlases are sized by --texel-density and "
+                f"--atlas-size): leave it out")
+    return (f"{flags} only work{'s' if len(idle) == 1 else ''} with atlases, and these are per-object "
+            f"lightmaps (sized by --resolution): add --lightmaps atlas")
 
 
 def default(name: str):

@@ -4,10 +4,10 @@ after the other on its worker; Esc keeps the frames already finished, as a short
 Apply After Bake (and a step of 1) the lightmaps go on as image sequences that follow the timeline."""
 import json
 import time
-from dataclasses import replace
 
 from ..detp_bake import blender
-from ..detp_bake.run import frames, job as job_mod, memory
+from ..detp_bake.estimators import FrameState
+from ..detp_bake.run import door, frames, job as job_mod, memory
 from ..detp_bake.errors import BakeError
 from . import common
 from .job import BakeJob
@@ -29,7 +29,6 @@ class FramesBlenderJob(BakeJob):
         busy = job_mod.busy_message()
         if busy:
             raise job_mod.JobBusy(busy)
-        replace(self.settings).validate()
         if not self.objects:
             raise BakeError("nothing to bake: no visible mesh with 'Include' set in the scene")
         self.frame_range = frames.parse_frames(self.range_text)
@@ -37,8 +36,7 @@ class FramesBlenderJob(BakeJob):
         if not s.output_directory.strip() or (s.output_directory.startswith("//") and not context.blend_data.filepath):
             raise BakeError("setting 'output_directory' is relative to the .blend: save the file first "
                             "or choose an absolute folder")
-        from ..detp_bake.lightmap import images
-        images.check_writable_dir(self.out_dir)
+        self.admission = door.admit(self.settings, out_dir=self.out_dir, frame_state=FrameState())  # run/door.py
         cluster = common.cluster(context)  # the preferences' Dask scheduler: connected by the job's worker
         scenes = {}
         t0 = time.perf_counter()
@@ -62,7 +60,7 @@ class FramesBlenderJob(BakeJob):
         names = {o.name for scene in scenes.values() for o in scene.objects}
         moving = [n for n in self.moving if n in names]  # overrides on lights, empties, ... say nothing
         static = [n for n in self.static if n in names]
-        self.job = job_mod.FramesJob(scenes.__getitem__, self.frame_range, self.settings, self.out_dir,
+        self.job = job_mod.FramesJob(scenes.__getitem__, self.frame_range, self.admission, None,
                                      moving=moving, static=static, export_seconds=self.export_seconds,
                                      cluster=cluster if hasattr(cluster, "client") else None)
 

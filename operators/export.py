@@ -49,6 +49,8 @@ class DETPBAKE_OT_export_gltf(bpy.types.Operator, ExportHelper):
         except BakeError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
+        for warning in done["warnings"]:
+            self.report({"WARNING"}, warning)
         self.report({"INFO"}, f"Exported {done['gltf']}: {len(done['objects'])} objects, {done['images']} "
                               f"{done['estimator']} lightmaps from {out_dir}")
         return {"FINISHED"}

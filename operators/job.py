@@ -9,13 +9,11 @@ exported, whatever scene is current by then.
 import contextlib
 import json
 import time
-from dataclasses import replace
 
 import bpy
 
 from ..detp_bake import blender
-from ..detp_bake.lightmap import images
-from ..detp_bake.run import job as job_mod
+from ..detp_bake.run import door, job as job_mod
 from ..detp_bake.errors import BakeError
 from . import common
 
@@ -49,15 +47,13 @@ class BlenderJob:
         busy = job_mod.busy_message()
         if busy:
             raise job_mod.JobBusy(busy)
-        for name in self.names or [self.settings.estimator]:
-            replace(self.settings, estimator=name).validate()
         if not self.objects:
             raise BakeError(f"nothing to {self.kind}: no visible mesh with 'Include' set in the scene")
         s = self.bl_scene.detp_bake
         if not s.output_directory.strip() or (s.output_directory.startswith("//") and not bpy.data.filepath):
             raise BakeError("setting 'output_directory' is relative to the .blend: save the file first "
                             "or choose an absolute folder")
-        images.check_writable_dir(self.out_dir)
+        self.admission = door.admit(self.settings, self.names, self.out_dir)  # checked once (run/door.py)
         cluster = common.cluster(context)  # the preferences' Dask scheduler: connected by the job's worker
         t0 = time.perf_counter()
         try:
@@ -69,7 +65,7 @@ class BlenderJob:
         self.export_seconds = time.perf_counter() - t0
         # A bake keeps the lightmaps of objects unchanged since the last bake into the same folder
         # (incremental.py), as the command line does, unless Rebake All says otherwise.
-        self.job = job_mod.Job(scene, self.settings, self.out_dir, self.names, export_seconds=self.export_seconds,
+        self.job = job_mod.Job(scene, self.admission, None, self.names, export_seconds=self.export_seconds,
                                preview=self.preview_interval, reuse=self.names is None,
                                force=bool(self.bl_scene.detp_bake.rebake_all),
                                cluster=None if isinstance(cluster, contextlib.AbstractContextManager)

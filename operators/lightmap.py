@@ -104,47 +104,6 @@ class DETPBAKE_OT_open_image(bpy.types.Operator):
         return {"FINISHED"}
 
 
-def _xatlas_unwrap(obj, layer, resolution):
-    """Charts from Smart UV Project (whole polygons, so every face keeps consistent UVs), packed
-    by xatlas at the lightmap's resolution with a 2-texel bilinear padding; only `layer` changes.
-    Returns xatlas' utilisation of the lightmap."""
-    import xatlas
-
-    blender.unwrap_into(obj, layer, lambda: bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0))
-    me = obj.data
-    me.calc_loop_triangles()
-    tri_l = np.empty(len(me.loop_triangles) * 3, np.int64)
-    me.loop_triangles.foreach_get("loops", tri_l)
-    loop_v = np.empty(len(me.loops), np.int64)
-    me.loops.foreach_get("vertex_index", loop_v)
-    co = np.empty(len(me.vertices) * 3, np.float32)
-    me.vertices.foreach_get("co", co)
-    co = co.reshape(-1, 3) * np.abs(np.array(obj.matrix_world.to_scale(), np.float32))
-    uv = np.empty(len(me.loops) * 2, np.float32)
-    me.uv_layers[layer].uv.foreach_get("vector", uv)
-    uv = uv.reshape(-1, 2)
-    # One xatlas vertex per (mesh vertex, UV) pair: islands stay connected, seams stay seams.
-    keys, vertex_of_loop = np.unique(np.c_[loop_v, np.round(uv * 1e6)], axis=0, return_inverse=True)
-    vertex_of_loop = vertex_of_loop.reshape(-1)
-    first = np.zeros(len(keys), np.int64)
-    first[vertex_of_loop] = np.arange(len(vertex_of_loop))
-    atlas = xatlas.Atlas()
-    atlas.add_mesh(np.ascontiguousarray(co[loop_v[first]]), vertex_of_loop[tri_l].reshape(-1, 3).astype(np.uint32),
-                   None, np.ascontiguousarray(uv[first]))
-    charts = xatlas.ChartOptions()
-    charts.use_input_mesh_uvs = True
-    pack = xatlas.PackOptions()
-    pack.resolution = int(resolution)
-    pack.padding = 2
-    pack.bilinear = True
-    atlas.generate(charts, pack)
-    _, indices, packed = atlas[0]
-    out = np.zeros_like(uv)
-    out[tri_l] = packed[indices.reshape(-1)]
-    me.uv_layers[layer].uv.foreach_set("vector", out.reshape(-1))
-    return float(np.ravel(atlas.utilization)[0])
-
-
 class DETPBAKE_OT_unwrap(bpy.types.Operator):
     """Create (or redo) the lightmap UV layer of the selected meshes, leaving other UV layers alone"""
     bl_idname = "detp_bake.unwrap"
@@ -166,15 +125,12 @@ class DETPBAKE_OT_unwrap(bpy.types.Operator):
         for obj in objects:
             layer = obj.detp_bake.uv_layer
             res = obj.detp_bake.resolution or s.resolution
-            existed = layer in obj.data.uv_layers
             if self.method == "XATLAS":
-                used = _xatlas_unwrap(obj, layer, res)
+                used = blender.xatlas_unwrap(obj, layer, res)
                 self.report({"INFO"}, f"'{obj.name}': xatlas charts use {100 * used:.0f} % of the lightmap")
             else:
-                if existed:
-                    obj.data.uv_layers.remove(obj.data.uv_layers[layer])
                 # Lightmap Pack leaves 2 / int(100 / margin) of UV space between charts: about 3 texels.
-                blender.ensure_lightmap_uv(obj, layer, margin=float(np.clip(150.0 / res, 0.001, 1.0)))
+                blender.lightmap_pack(obj, layer, margin=float(np.clip(150.0 / res, 0.001, 1.0)))
         self.report({"INFO"}, f"Unwrapped {len(objects)} objects into '{objects[0].detp_bake.uv_layer}' "
                               f"with {'xatlas' if self.method == 'XATLAS' else 'Lightmap Pack'}")
         return {"FINISHED"}

@@ -72,6 +72,7 @@ class RecordingLayout:
         self.bpy, self.log = bpy, log
         self.use_property_split = False
         self.scale_y = 1.0
+        self.active = True
 
     def _child(self, *args, **kwargs):
         return RecordingLayout(self.bpy, self.log)
@@ -84,6 +85,8 @@ class RecordingLayout:
     def prop(self, data, path, **kwargs):
         assert path in data.bl_rna.properties, f"{data} has no property {path!r}"
         self.log.append(("prop", path))
+        if not self.active:
+            self.log.append(("greyed", path))
 
     def operator(self, idname, **kwargs):
         category, name = idname.split(".")
@@ -122,6 +125,23 @@ def test_every_panel_draws_existing_properties_and_operators(addon, cornell, bpy
     # Every bake setting of options.py but the machine's memory budget (a preference) is on a panel.
     from detp_bake import options
     assert {o.name for o in options.OPTIONS} - seen == {"memory_budget_mb"}
+
+
+def test_the_size_settings_that_do_nothing_in_a_mode_are_greyed_out(addon, cornell, bpy):
+    """What the command line refuses outside its mode (--atlas-size without atlases, --resolution with
+    them) the panel shows greyed out, read from the same declaration (options.Option.lightmaps)."""
+    from detp_bake_addon.ui import panels
+    s = cornell.detp_bake
+    greyed = {}
+    for lightmaps in ("object", "atlas"):
+        s.lightmaps, s.resolution_mode = lightmaps, "FIXED"
+        log = []
+        panels.DETPBAKE_PT_lightmaps.draw(type("P", (), {"layout": RecordingLayout(bpy, log)})(), bpy.context)
+        sizes = {"resolution", "texel_density", "atlas_size", "atlas_padding", "atlas_charts"}
+        greyed[lightmaps] = {path for kind, path in log if kind == "greyed"} & sizes
+        assert {path for kind, path in log if kind == "prop"} >= {"resolution", "atlas_size", "atlas_padding"}
+    assert greyed["object"] == {"atlas_size", "atlas_padding", "atlas_charts"}
+    assert greyed["atlas"] == {"resolution"}
 
 
 def _small(scene, out, **extra):

@@ -203,39 +203,3 @@ def test_contact_shadows_and_corners_match_cycles(cornell, bpy):
         gy, gx = np.gradient(ref[name][..., 0])
         edge = np.hypot(gx, gy)[m] > 0.05 * theirs.max()
         assert edge.sum() > 50 and abs(ours[edge].sum() / theirs[edge].sum() - 1) < 0.01, name
-
-
-def _uvs(obj, layer):
-    flat = np.empty(len(obj.data.loops) * 2, np.float32)
-    obj.data.uv_layers[layer].uv.foreach_get("vector", flat)
-    return flat
-
-
-def test_missing_lightmap_uvs_are_made_in_one_pack_as_one_by_one(bpy):
-    """Lightmap UV layers of many objects are made by one Lightmap Pack call (blender/uv.py, no
-    mode switch per object): each mesh gets the UVs one call of its own gives it, byte for byte, in
-    its own square; a mesh shared by two objects once; every mesh's active UV layer stays."""
-    from detp_bake.blender.uv import ensure_lightmap_uv, ensure_lightmap_uvs
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    objs = []
-    for i in range(3):
-        bpy.ops.mesh.primitive_cube_add(size=1.0 + 0.4 * i, location=(3 * i, 0, 0))  # its own 'UVMap', active
-        objs.append(bpy.context.active_object)
-    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, location=(0, 5, 0))
-    objs.append(bpy.context.active_object)
-    twin = objs[0].copy()  # shares the first cube's mesh
-    bpy.context.scene.collection.objects.link(twin)
-    copies = []
-    for obj in objs:
-        copy = obj.copy()
-        copy.data = obj.data.copy()
-        bpy.context.scene.collection.objects.link(copy)
-        copies.append(copy)
-    made = ensure_lightmap_uvs(objs + [twin], {o.name: "Lightmap" for o in objs + [twin]})
-    assert made == objs
-    for obj, copy in zip(objs, copies):
-        assert ensure_lightmap_uv(copy, "Lightmap")
-        uv = _uvs(obj, "Lightmap")
-        assert np.array_equal(uv, _uvs(copy, "Lightmap"))
-        assert uv.min() >= 0.0 and uv.max() <= 1.0 and np.ptp(uv) > 0.5
-        assert obj.data.uv_layers.active.name == "UVMap"

@@ -42,3 +42,25 @@ def test_a_fragmented_unwrap_is_warned_about_and_a_clean_one_is_not():
     shards = next(o for o in r.report()["objects"] if o["name"] == "Shards")
     assert shards["charts"]["count"] == 256 and shards["charts"]["median_width"] == 1.2
     assert shards["charts"]["border"] > 0.9
+
+
+def test_in_an_atlas_the_chart_warning_names_the_fragmented_objects_not_the_atlas():
+    """Two objects in one atlas, one cut in shards: the warning names 'Shards' (its own charts and
+    border share) and what to click, never 'atlas_0' as an object; report.json gives each its own."""
+    sun = SunLight("Sun", np.array([0.0, 0.0, -1.0]), np.full(3, 3.0))
+    clean_pos, clean_nrm, clean_uv = grid(2.0, 2.0, 8)
+    shard_pos, shard_nrm, shard_uv = _quads_apart(16, 0.6)
+    clean_uv = clean_uv * [0.5, 1.0]  # left half of the atlas
+    shard_uv = shard_uv * [0.5, 1.0] + [0.5, 0.0]  # right half
+    scene = make_scene([("Clean", (clean_pos, clean_nrm, clean_uv), 0.5, True),
+                        ("Shards", (shard_pos + [3.0, 0, 0], shard_nrm, shard_uv), 0.5, True)], [sun], resolution=64)
+    for obj in scene.objects:
+        obj.image = "atlas_0"
+    r = compute(scene, BakeSettings(photons=20_000, denoise=False, bounces=0))
+    said = [w for w in r.warnings if "charts" in w]
+    assert len(said) == 1 and said[0].startswith("object 'Shards' (256 charts, median 1.6 texels wide, ")  # 1.2 × 2.4 texels
+    assert "in atlas 'atlas_0'" in said[0] and "'Clean'" not in said[0] and "object 'atlas_0'" not in said[0]
+    assert "Unwrap Lightmap UVs › xatlas" in said[0] and "--texel-density" in said[0]
+    entries = {o["name"]: o["charts"] for o in r.report()["objects"]}
+    assert entries["Clean"]["count"] == 1 and entries["Shards"]["count"] == 256
+    assert entries["Shards"]["border"] > 0.9 > 0.2 > entries["Clean"]["border"]

@@ -147,3 +147,28 @@ def test_non_finite_settings_are_refused_before_work(tmp_path, option, value, ca
     err = capsys.readouterr().err
     assert option.lstrip("-").replace("-", "_") in err
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+@pytest.mark.parametrize("command", ["bake", "compare"])
+def test_a_bake_is_checked_once_at_the_door(tmp_path, monkeypatch, bpy, command):
+    """The settings of each estimator are validated once, the output folder proved writable once, and
+    the automatic photon count worked out once, however many layers (command line, job, pipeline,
+    writing) the bake passes through (run/door.py)."""
+    from detp_bake.lightmap import images
+    from detp_bake.run import door
+    from detp_bake.run.settings import BakeSettings
+    calls = {"validate": 0, "writable": 0, "photons": 0}
+
+    def counted(key, real):
+        def wrapper(*args, **kwargs):
+            calls[key] += 1
+            return real(*args, **kwargs)
+        return wrapper
+    monkeypatch.setattr(BakeSettings, "validate", counted("validate", BakeSettings.validate))
+    monkeypatch.setattr(images, "check_writable_dir", counted("writable", images.check_writable_dir))
+    monkeypatch.setattr(door, "auto_photons", counted("photons", door.auto_photons))
+    names = ["texel_histogram"] if command == "bake" else ["texel_histogram", "photon_map"]
+    extra = [] if command == "bake" else ["--estimators", *names]
+    assert main([command, str(CORNELL), "--objects", "Floor", "--resolution", "16", "--no-denoise",
+                 "--out", str(tmp_path / "out"), *extra]) == 0
+    assert calls == {"validate": len(names), "writable": 1, "photons": 1}, calls

@@ -89,20 +89,20 @@ def test_the_threads_setting_reaches_the_compiled_estimators():
     """threads=1 runs numba's parallel loops on one thread for the bake, and leaves the setting
     as it was afterwards; the result is the same bit for bit as on all threads."""
     import numba
-    from detp_bake.run import bake as bake_mod
+    from detp_bake.run import pipeline
     seen = []
-    original = bake_mod._compute_many
+    original = pipeline.Pipeline.run
 
     def spy(*args, **kw):
         seen.append(numba.get_num_threads())
         return original(*args, **kw)
     sc, _ = _sphere()
     before = numba.get_num_threads()
-    bake_mod._compute_many = spy
+    pipeline.Pipeline.run = spy
     try:
         one = compute(sc, BakeSettings(photons=50_000, bounces=2, threads=1, denoise=False))
         every = compute(sc, BakeSettings(photons=50_000, bounces=2, denoise=False))
     finally:
-        bake_mod._compute_many = original
+        pipeline.Pipeline.run = original
     assert seen == [1, before] and numba.get_num_threads() == before
     assert np.array_equal(one.value, every.value)

@@ -8,13 +8,13 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 
 import numpy as np
 import pytest
 
 from conftest import CORNELL, ROOT
 from detp_bake.cli import main
+import battery
 
 
 def _files(folder):
@@ -61,21 +61,6 @@ def _start(args, tmp_path, hold_in_write=False, **env):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def _wait_for(proc, text, seconds=120.0):
-    """Read stderr until a line holds `text`; the lines read so far."""
-    lines = []
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        line = proc.stderr.readline()
-        if not line:
-            break
-        lines.append(line)
-        if text in line:
-            return lines
-    proc.kill()
-    raise AssertionError(f"never saw {text!r}: {''.join(lines)}")
-
-
 def _older_bake(out):
     out.mkdir()
     (out / "Floor.texel_histogram.exr").write_bytes(b"an older bake")
@@ -96,7 +81,7 @@ def test_a_signal_cancels_cleanly_while_tracing_or_writing(tmp_path, sig, phase)
     photons = "100000000" if phase == "trace" else "5000"
     proc = _start(["bake", str(CORNELL), "--photons", photons, "--resolution", "16", "--out", str(out)],
                   tmp_path, hold_in_write=phase == "write")
-    seen = _wait_for(proc, "Tracing" if phase == "trace" else "holding in write")
+    seen = battery.wait_for(proc, "Tracing" if phase == "trace" else "holding in write")
     if phase == "write":
         assert any(".partial." in name for name in _files(out))  # a file really was being staged
     proc.send_signal(sig)

@@ -4,7 +4,7 @@ import json
 
 import bpy
 
-from ..detp_bake import estimators
+from ..detp_bake import estimators, options
 from ..operators import common
 
 
@@ -130,14 +130,18 @@ class DETPBAKE_PT_lightmaps(_Panel, bpy.types.Panel):
         layout.use_property_split = True
         s = context.scene.detp_bake
         layout.prop(s, "lightmaps")
+        # Every size setting stays in view; those that do nothing in this mode (options.Option.lightmaps,
+        # what the command line refuses) are greyed out.
         if s.lightmaps == "atlas":
-            layout.prop(s, "texel_density")
-            layout.prop(s, "atlas_size")
-            layout.prop(s, "atlas_padding")
-            layout.prop(s, "atlas_charts")
+            names = ["texel_density", "atlas_size", "atlas_padding", "atlas_charts", "resolution"]
         else:
-            layout.prop(s, "resolution_mode")
-            layout.prop(s, "resolution" if s.resolution_mode == "FIXED" else "texel_density")
+            names = ["resolution_mode", "resolution" if s.resolution_mode == "FIXED" else "texel_density",
+                     "atlas_size", "atlas_padding", "atlas_charts"]
+        for name in names:
+            row = layout.row()
+            declared = options.BY_NAME.get(name)
+            row.active = name == "texel_density" or declared is None or declared.lightmaps in ("", s.lightmaps)
+            row.prop(s, name)
         layout.prop(s, "margin")
         layout.prop(s, "directional")
         lights = sorted((o for o in context.scene.objects if o.type == "LIGHT"), key=lambda o: o.name)

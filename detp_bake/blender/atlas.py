@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import BakeError
 from ..lightmap import atlas as atlas_mod
-from .uv import unwrap_into
+from .uv import mesh_arrays, unwrap_into
 
 ATLAS_UV = "LightmapAtlas"
 SMART_UV = "detp_bake smart islands"
@@ -42,22 +42,31 @@ def _single_users(objects, log) -> None:
             "object: each now has a mesh of its own (its texels in the atlas are its own)")
 
 
+# Modifiers whose copies of the faces keep the mesh's UVs: the copies share the object's texels.
+COPYING = {"ARRAY": "Array", "MIRROR": "Mirror", "SOLIDIFY": "Solidify", "SCREW": "Screw"}
+
+
+def _copied(objects, log) -> None:
+    """Say, before the bake, which objects' modifiers copy faces onto the same atlas texels: a UV
+    layer lives on the mesh, so no packing can give the copies texels of their own."""
+    found = []
+    for obj in objects:
+        kinds = list(dict.fromkeys(COPYING[m.type] for m in obj.modifiers if m.type in COPYING and m.show_render))
+        if kinds:
+            found.append(f"'{obj.name}' ({', '.join(kinds)})")
+    if found:
+        log(f"atlas: the modifiers of {', '.join(found[:6])}{' …' if len(found) > 6 else ''} copy faces with their "
+            "lightmap UVs, so the copies share texels (one light for all): apply the modifiers (Object › Apply) to "
+            "give each copy texels of its own")
+
+
 def _triangles(obj, layer: str):
     """(loop indices (T, 3), world positions (T, 3, 3), the layer's UVs (T, 3, 2)) of obj's mesh."""
-    me = obj.data
-    me.calc_loop_triangles()
-    loops = np.empty(len(me.loop_triangles) * 3, np.int64)
-    me.loop_triangles.foreach_get("loops", loops)
-    vertex = np.empty(len(me.loops), np.int64)
-    me.loops.foreach_get("vertex_index", vertex)
-    co = np.empty(len(me.vertices) * 3, np.float64)
-    me.vertices.foreach_get("co", co)
+    loops, vertex, co, uv = mesh_arrays(obj, layer, np.float64)
     m = np.array(obj.matrix_world, np.float64)
-    world = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
-    uv = np.empty(len(me.loops) * 2, np.float64)
-    me.uv_layers[layer].uv.foreach_get("vector", uv)
+    world = co @ m[:3, :3].T + m[:3, 3]
     loops = loops.reshape(-1, 3)
-    return loops, world[vertex[loops]], uv.reshape(-1, 2)[loops]
+    return loops, world[vertex[loops]], uv[loops]
 
 
 def _islands(obj, layer: str, charts: str):
@@ -102,6 +111,7 @@ def pack(bl_scene, objects, layers: dict, settings, log, created=None) -> dict:
     """Pack `objects` (their islands in `layers` {name: UV layer}) into atlases, each one's UVs
     written into ATLAS_UV; returns {object name: (atlas name, its side in texels)}."""
     _single_users(objects, log)
+    _copied(objects, log)
     digest = _hash(objects, layers, settings)
     state = json.loads(bl_scene.get(STATE, "{}"))
     fresh = state.get("hash") == digest and all(ATLAS_UV in o.data.uv_layers for o in objects) \

@@ -388,6 +388,7 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = T
     table = TextureTable()
     first, names, no_area = 0, set(), []
     instances = instanced_tris = 0
+    degenerate: dict = {}  # baked owner -> [triangles without area, triangles]
     for (owner, bake), recs in groups.items():
         start = first
         batches: dict = {}  # placements that share geometry and materials are placed together
@@ -396,6 +397,9 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = T
         for (key, _, emissive_only, instanced), (rows, ms) in batches.items():
             g, n_inst = c.geometry[key], len(ms)
             p, n, keep = _place(g, np.array(ms))
+            if bake:  # collapsed faces, zero-length edges: no area, no light; said by the caller
+                flat = degenerate.setdefault(owner, [0, 0])
+                flat[0], flat[1] = flat[0] + int(len(keep) - keep.sum()), flat[1] + len(keep)
             mi = np.tile(np.clip(g.material, 0, len(rows.albedo) - 1), n_inst)
             a, e = rows.albedo[mi], rows.emission[mi]
             surface = table.triangles(rows, g, mi, n_inst, a, c.log)
@@ -442,6 +446,7 @@ def flatten(c: Collector, resolution, max_bytes: Optional[int], strict: bool = T
         "largest": top,
         "left_out": c.left_out,
         "no_area": no_area,
+        "degenerate_triangles": {name: counts for name, counts in degenerate.items() if counts[0]},
     }
     surfaces = table.finish(surf)
     stats["textures"] = len(table.images)

@@ -15,7 +15,7 @@ from .materials import Surface, read_surface
 from .world import export_world
 from .atlas import ATLAS_UV, pack as atlas_pack
 from .identity import fingerprints
-from .uv import ensure_lightmap_uvs
+from .uv import check_can_add, ensure_lightmap_uv
 
 
 def material_surface(mat) -> Surface:
@@ -114,8 +114,8 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
     view layer (default: the context's); a render depsgraph is used as it is.
 
     `uv_layer` names the lightmap UV layer: one name for all, or {object name: layer} for some; a
-    named layer must exist. Objects with no name given use DEFAULT_UV, created by Lightmap Pack
-    where missing (said through `log`, and listed in `created` as (object, layer) so a cancelled
+    named layer must exist. Objects with no name given use DEFAULT_UV, created with xatlas charts
+    (blender/uv.py) where missing (said through `log`, and listed in `created` as (object, layer) so a cancelled
     bake can remove it again). `resolution` is one size for all or {object name: size}.
     `max_bytes` limits the flattened geometry (BakeError naming the biggest contributors). `atlas`:
     the BakeSettings of a bake into atlases (lightmaps 'atlas'): the objects' islands are packed
@@ -132,15 +132,24 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
         if layer is not None and layer not in obj.data.uv_layers:
             raise BakeError(f"object '{obj.name}' has no UV layer '{layer}'")
     layers = {o.name: named.get(o.name) or DEFAULT_UV for o in targets}
-    made = ensure_lightmap_uvs(targets, layers)
-    for layer in dict.fromkeys(layers[o.name] for o in made):  # one line per layer name, not per object
-        names = [o.name for o in made if layers[o.name] == layer]
-        log(f"created UV layer '{layer}' with Lightmap Pack on {', '.join(repr(n) for n in names[:8])}"
-            + (f" and {len(names) - 8} more objects" if len(names) > 8 else ""))
-    if created is not None:
-        created.extend((o.name, layers[o.name]) for o in made)
-    in_atlas = {}
-    if atlas is not None and atlas.lightmaps == "atlas":
+    in_atlas = atlas is not None and atlas.lightmaps == "atlas"
+    made = []
+    for obj in targets:
+        check_can_add(obj, layers[obj.name])
+        if in_atlas:
+            check_can_add(obj, ATLAS_UV)
+    for obj in targets:
+        size = resolution.get(obj.name, 0) if isinstance(resolution, dict) else resolution
+        density = atlas.texel_density * (obj.detp_bake.density_scale if hasattr(obj, "detp_bake") else 1.0) \
+            if in_atlas else 0.0
+        if ensure_lightmap_uv(obj, layers[obj.name], int(size or 0), density):
+            made.append(obj.name)
+            if created is not None:
+                created.append((obj.name, layers[obj.name]))
+    if made:
+        log(f"created UV layer '{layers[made[0]]}' with xatlas charts on {', '.join(made[:5])}"
+            + (f" and {len(made) - 5} more" if len(made) > 5 else ""))
+    if in_atlas:
         in_atlas = atlas_pack(bl_scene, targets, layers, atlas, log, created)
         layers = {name: ATLAS_UV for name in layers}
         resolution = {name: side for name, (_, side) in in_atlas.items()}
@@ -163,7 +172,7 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
         warn(f"no lightmap for '{name}': all its faces have zero area")
     world, world_map = export_world(bl_scene.world, log)
     for obj in objs:
-        obj.image = in_atlas[obj.name][0] if obj.name in in_atlas else ""
+        obj.image = in_atlas[obj.name][0] if in_atlas and obj.name in in_atlas else ""
     scene = Scene(positions=pos, normals=nrm, uvs=uvs, albedo=alb, emission=emi, objects=objs,
                   lights=collector.lights, world=world, default_bounces=scene_bounces(bl_scene),
                   world_map=world_map, **surfaces)

@@ -18,6 +18,11 @@ def open_blend(path: Path):
         bpy.ops.wm.open_mainfile(filepath=str(path.resolve()))
     except RuntimeError as exc:
         raise BakeError(f"cannot open scene file '{path}': {exc}") from None
+    saved, running = tuple(bpy.data.version[:2]), tuple(bpy.app.version[:2])
+    if saved > running:  # Blender reads it, says "expect loss of data" and goes on: we do not
+        raise BakeError(f"scene file '{path}' was saved by Blender {saved[0]}.{saved[1]}, newer than this Blender "
+                        f"{bpy.app.version_string}: what it reads of it may be wrong or missing; bake with Blender "
+                        f"{saved[0]}.{saved[1]} or later (the bpy wheel of that line)")
     return bpy.context.scene
 
 

@@ -153,19 +153,74 @@ def export_gltf(bl_scene, out_dir, path, estimator: Optional[str] = None, uv_lay
             for exr in dict.fromkeys(files.values())}
     state = _State(pngs)
     state.sh = {exr: sh_pngs(exr, axes) for exr, axes in sh_files(out_dir, estimator).items() if exr in pngs}
-    with _prepared(targets, files, state), _listed_as_addon():
-        result = bpy.ops.export_scene.gltf(
-            filepath=str(path), export_format="GLB", use_active_scene=True, use_renderable=True,
-            export_apply=True, export_texcoords=True, export_normals=True, export_materials="EXPORT",
-            export_cameras=True, export_animations=False)
-    missed = sorted(state.gltf_names[m] for m in state.materials if m not in state.done)
-    if state.errors or missed or "FINISHED" not in result:
-        raise BakeError(f"glTF export of '{path}' failed: " +
-                        "; ".join(state.errors or [f"no lightmap on material {', '.join(missed)}"]))
+    said = _write(path, targets, files, state)
+    warnings = [f"glTF '{path.name}': no lightmap on {said}; written without one"] if said else []
+    for warning in warnings:
+        log(f"warning: {warning}")
     log(f"exported {path} with {len(pngs)} {estimator} lightmaps on {len(targets)} objects"
         + (f", SH L1 maps of {len(state.sh)} ({SH_EXTENSION})" if state.sh else ""))
     return {"gltf": str(path), "estimator": estimator, "objects": sorted(files), "images": len(pngs),
-            **({"sh": len(state.sh)} if state.sh else {})}
+            "warnings": warnings, **({"sh": len(state.sh)} if state.sh else {})}
+
+
+def _write(path: Path, targets: dict, files: dict, state: "_State") -> str:
+    """Export to `path` under a hidden name, renamed once it holds a lightmap (a failed export leaves
+    no file); returns what got none ('' when all did). BakeError when nothing did."""
+    partial = path.with_name(f".{path.stem}.partial.glb")
+    try:
+        with _prepared(targets, files, state), _listed_as_addon():
+            try:
+                result = bpy.ops.export_scene.gltf(
+                    filepath=str(partial), export_format="GLB", use_active_scene=True, use_renderable=True,
+                    export_apply=True, export_texcoords=True, export_normals=True, export_materials="EXPORT",
+                    export_cameras=True, export_animations=False)
+            except RuntimeError as exc:
+                raise BakeError(f"glTF export of '{path}' failed: {exc}") from None
+        lit, unlit = _lightmapped(partial, files) if "FINISHED" in result and partial.is_file() else (0, [])
+        said = _unlit_text(unlit, state)
+        if not lit:
+            raise BakeError(f"glTF export of '{path}' failed: no exported mesh carries a lightmap"
+                            + (f" (none on {said})" if said else ""))
+        os.replace(partial, path)
+        return said
+    finally:
+        partial.unlink(missing_ok=True)
+
+
+def _lightmapped(glb: Path, files: dict) -> tuple[int, list]:
+    """(primitives with a lightmap, [(object, its material's name, why)] of those without) in the
+    written .glb; a baked object the export left out counts as one without."""
+    data = glb.read_bytes()
+    doc = json.loads(data[20:20 + int.from_bytes(data[12:16], "little")])
+    lit, unlit, seen = 0, [], set()
+    for node in doc.get("nodes", []):
+        if "mesh" not in node:
+            continue
+        seen.add(node.get("name"))
+        for prim in doc["meshes"][node["mesh"]].get("primitives", []):
+            material = doc["materials"][prim["material"]] if "material" in prim else {}
+            if EXTENSION in (material.get("extensions") or {}):
+                lit += 1
+            else:
+                why = "material" if node.get("name") in files else "not baked"
+                unlit.append((node.get("name"), material.get("name", ""), why))
+    unlit += [(name, "", "not exported") for name in sorted(set(files) - seen)]
+    return lit, unlit
+
+
+def _unlit_text(unlit: list, state: "_State") -> str:
+    """What has no lightmap, each object or material once, and any error of the export's hook."""
+    items = []
+    for obj, material, why in unlit:
+        if why == "material":
+            items.append(f"material '{material.removesuffix(TEMP)}' of object '{obj}'")
+        elif why == "not exported":
+            items.append(f"object '{obj}' (baked, but not in the export: is it rendered?)")
+        else:
+            items.append(f"object '{obj}' (not baked)")
+    items = list(dict.fromkeys(items))
+    text = ", ".join(items[:8]) + (f" and {len(items) - 8} more" if len(items) > 8 else "")
+    return "; ".join(([text] if text else []) + state.errors)
 
 
 class _State:
@@ -289,7 +344,10 @@ def _prepared(targets: dict, files: dict, state: _State):
             state.gltf_names[copy.name] = original.name
             _order_uvs(copy, layer)
             obj.data = copy
+            used = _used_slots(copy, len(obj.material_slots))
             for index, slot in enumerate(obj.material_slots):
+                if index not in used:  # a slot no face uses: the exporter leaves it out
+                    continue
                 temp = _material_for(obj, index, files[obj.name], state, made)
                 if slot.link == "OBJECT":
                     slots.append((slot, slot.material))
@@ -309,6 +367,13 @@ def _prepared(targets: dict, files: dict, state: _State):
             obj.data = original
         for block in reversed(made):
             (bpy.data.meshes if isinstance(block, bpy.types.Mesh) else bpy.data.materials).remove(block)
+
+
+def _used_slots(mesh, slots: int) -> set:
+    """The material slots some face of `mesh` uses (an index past the last slot is the last's)."""
+    index = np.empty(len(mesh.polygons), np.int32)
+    mesh.polygons.foreach_get("material_index", index)
+    return set(np.clip(np.unique(index), 0, max(slots - 1, 0)).tolist())
 
 
 def _user_material(obj, index: int):

@@ -277,6 +277,41 @@ def read_surface(mat, has_nodes: bool) -> Surface:
     return s
 
 
+def _alpha_image(src):
+    """The Image Texture whose Alpha output `src` is, or None."""
+    return src[0] if src is not None and src[0].type == "TEX_IMAGE" and src[1].name == "Alpha" else None
+
+
+def _alpha_mask_image(src):
+    """The Image Texture under an alpha cut-off as Blender's glTF importer builds one for alphaMode
+    MASK, 1 − (alpha < cutoff), or as Greater Than or Round on the alpha; None for anything else.
+    The image's alpha stands for the mask: a mask's alpha is 0 or 1 nearly everywhere, and reading
+    the threshold as such would lose the leaves of every imported plant to opaque cards."""
+    if src is None or src[0].type != "MATH":
+        return None
+    math = src[0]
+    if math.operation in ("GREATER_THAN", "ROUND"):
+        return _alpha_image(linked_socket(math.inputs[0]))
+    if math.operation == "SUBTRACT" and not math.inputs[0].is_linked and math.inputs[0].default_value == 1.0:
+        inner = linked_socket(math.inputs[1])
+        if inner is not None and inner[0].type == "MATH" and inner[0].operation == "LESS_THAN":
+            return _alpha_image(_alpha_times_attribute(linked_socket(inner[0].inputs[0])))
+    return None
+
+
+def _alpha_times_attribute(src):
+    """The image alpha in image alpha × Color Attribute alpha (the importer's alpha with COLOR_0),
+    whose attribute part the bake leaves out; `src` itself otherwise."""
+    if src is None or src[0].type != "MATH" or src[0].operation != "MULTIPLY":
+        return src
+    inputs = [linked_socket(sock) for sock in list(src[0].inputs)[:2]]
+    images = [i for i in inputs if _alpha_image(i) is not None]
+    others = [i for i in inputs if _alpha_image(i) is None]
+    if len(images) == 1 and others[0] is not None and others[0][0].type in ("VERTEX_COLOR", "ATTRIBUTE"):
+        return images[0]
+    return src
+
+
 def _shader(node, notes) -> Surface:
     t = node.type
     if t == "BSDF_PRINCIPLED":
@@ -286,8 +321,9 @@ def _shader(node, notes) -> Surface:
         s = Surface(albedo=base * diffuse, albedo_image=image, colour_attribute=attr, notes=notes)
         alpha = _input(node, "Alpha")
         src = linked_socket(alpha)
-        if src is not None and src[0].type == "TEX_IMAGE" and src[1].name == "Alpha":
-            s.opacity_image = image_use(src[0], notes)
+        mask = _alpha_image(src) or _alpha_mask_image(src)
+        if mask is not None:
+            s.opacity_image = image_use(mask, notes)
         elif src is not None:
             notes.append(f"the alpha of '{node.name}' comes from a {src[0].type.lower()} node: its value is used")
             s.opacity = _const(alpha, 1.0)

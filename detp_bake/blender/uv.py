@@ -1,12 +1,21 @@
-"""Lightmap UV layers: created with Blender's own unwrapping when missing, removed again when a bake
-that created them is cancelled."""
+"""Lightmap UV layers: created when missing (xatlas charts, `xatlas_unwrap`), removed again when a
+bake that created them is cancelled.
+
+A created layer is xatlas's: Smart UV Project's charts (whole polygons) packed at the lightmap's
+size or texel density with a 2-texel padding. Lightmap Pack, which the bake used before, gives one
+chart per face: on a level of 36,167 faces 36,015 charts under a texel wide, 82 % of the texels on
+a chart's border. The panel's Unwrap button runs the same function.
+"""
 from __future__ import annotations
 
-import contextlib
-import io
 from typing import Callable, Iterable
 
 import bpy
+import numpy as np
+
+from ..errors import BakeError
+
+PADDING = 2  # texels between xatlas charts: no texel shared under bilinear filtering
 
 
 def unwrap_into(obj, uv_name: str, unwrap: Callable[[], None]) -> None:
@@ -38,59 +47,112 @@ def unwrap_into(obj, uv_name: str, unwrap: Callable[[], None]) -> None:
         me.uv_layers.active = me.uv_layers[previous]
 
 
-def ensure_lightmap_uv(obj, uv_name: str, margin: float = 1.0) -> bool:
-    """Create `uv_name` with Blender's Lightmap Pack when it is missing; keep the active UV layer.
-    Returns True when the layer was created."""
+def check_can_add(obj, uv_name: str) -> None:
+    """A UV layer cannot be added to linked data (it is read-only here): say so before any work,
+    naming the object, its library and the fixes, instead of failing inside Blender's operator."""
+    library = getattr(obj.data, "library", None) or obj.library
+    if library is not None and uv_name not in obj.data.uv_layers:
+        path = bpy.path.abspath(library.filepath, library=library.library)
+        raise BakeError(f"object '{obj.name}' is linked from '{path}' and has no UV layer '{uv_name}', which cannot be "
+                        f"added to linked data: add it in that file, or make the object local "
+                        f"(Object > Relations > Make Local)")
+
+
+def lightmap_pack(obj, uv_name: str, margin: float = 1.0) -> None:
+    """Blender's Lightmap Pack into `uv_name` (one chart per face), replacing the layer."""
     if uv_name in obj.data.uv_layers:
-        return False
+        obj.data.uv_layers.remove(obj.data.uv_layers[uv_name])
     unwrap_into(obj, uv_name, lambda: bpy.ops.uv.lightmap_pack(
         PREF_CONTEXT="ALL_FACES", PREF_PACK_IN_ONE=True, PREF_NEW_UVLAYER=False, PREF_MARGIN_DIV=margin))
+
+
+def ensure_lightmap_uv(obj, uv_name: str, resolution: int = 0, density: float = 0.0) -> bool:
+    """Create `uv_name` with xatlas charts (`xatlas_unwrap`) when it is missing; keep the active UV
+    layer. Returns True when the layer was created."""
+    if uv_name in obj.data.uv_layers:
+        return False
+    xatlas_unwrap(obj, uv_name, resolution, density)
     return True
 
 
-def ensure_lightmap_uvs(objects: Iterable, layers: dict, margin: float = 1.0) -> list:
-    """`ensure_lightmap_uv` for many objects (`layers`: {object name: layer}) with one Lightmap
-    Pack call for all their meshes, each mesh packed into its own square, no mode switch: one call
-    per object cost 0.15 s, mostly the view layer update Blender runs around every operator call
-    (1,500 crates: 4 minutes). The objects whose layer was created, in order. Objects in edit mode
-    take the one-by-one path."""
-    objects = list(objects)
-    if any(o.mode == "EDIT" for o in objects):
-        return [o for o in objects if ensure_lightmap_uv(o, layers[o.name], margin)]
-    created, rounds = [], []  # rounds: [{mesh pointer: (object, layer)}], one layer per mesh a round
-    for obj in objects:
-        me, layer = obj.data, layers[obj.name]
-        if layer in me.uv_layers or any(r.get(me.as_pointer(), (None, None))[1] == layer for r in rounds):
-            continue
-        created.append(obj)
-        free = next((r for r in rounds if me.as_pointer() not in r), None)
-        if free is None:
-            rounds.append(free := {})
-        free[me.as_pointer()] = (obj, layer)
-    for pending in rounds:
-        _pack(list(pending.values()), margin)
-    return created
+def mesh_arrays(obj, layer: str, dtype=np.float32):
+    """(the triangles' corner loops (T·3,), each loop's vertex, the vertices (V, 3), each loop's UV in
+    `layer` (L, 2)) of obj's mesh, read in bulk."""
+    me = obj.data
+    me.calc_loop_triangles()
+    tri_l = np.empty(len(me.loop_triangles) * 3, np.int64)
+    me.loop_triangles.foreach_get("loops", tri_l)
+    loop_v = np.empty(len(me.loops), np.int64)
+    me.loops.foreach_get("vertex_index", loop_v)
+    co = np.empty(len(me.vertices) * 3, dtype)
+    me.vertices.foreach_get("co", co)
+    uv = np.empty(len(me.loops) * 2, dtype)
+    me.uv_layers[layer].uv.foreach_get("vector", uv)
+    return tri_l, loop_v, co.reshape(-1, 3), uv.reshape(-1, 2)
 
 
-def _pack(pairs: list, margin: float) -> None:
-    """Lightmap Pack into layer L of each (object, L) in `pairs` (each its own mesh), created here;
-    each mesh's active UV layer kept."""
-    previous = {}
-    for obj, layer in pairs:
-        me = obj.data
-        previous[obj.name] = me.uv_layers.active.name if me.uv_layers.active else None
-        me.uv_layers.active = me.uv_layers.new(name=layer)
-    chosen = [obj for obj, _ in pairs]
-    try:
-        with bpy.context.temp_override(selected_objects=chosen, active_object=chosen[0], object=chosen[0]), \
-                contextlib.redirect_stdout(io.StringIO()):  # the operator prints per mesh
-            bpy.ops.uv.lightmap_pack(PREF_CONTEXT="ALL_FACES", PREF_PACK_IN_ONE=False, PREF_NEW_UVLAYER=False,
-                                     PREF_MARGIN_DIV=margin)
-    finally:
-        for obj, _ in pairs:
-            me, name = obj.data, previous[obj.name]
-            if name is not None and name in me.uv_layers:
-                me.uv_layers.active = me.uv_layers[name]
+def _welded(obj, layer: str):
+    """(corner loops of the triangles (T, 3), xatlas vertices, their indices (T, 3), their UVs):
+    one vertex per (mesh vertex, UV) pair, so islands stay joined and seams stay seams; positions
+    in the object's scaled space (texels per metre hold on a scaled object)."""
+    tri_l, loop_v, co, uv = mesh_arrays(obj, layer)
+    co = co * np.abs(np.array(obj.matrix_world.to_scale(), np.float32))
+    keys, vertex_of_loop = np.unique(np.c_[loop_v, np.round(uv * 1e6)], axis=0, return_inverse=True)
+    vertex_of_loop = vertex_of_loop.reshape(-1)
+    first = np.zeros(len(keys), np.int64)
+    first[vertex_of_loop] = np.arange(len(vertex_of_loop))
+    index = vertex_of_loop[tri_l].reshape(-1, 3).astype(np.uint32)
+    return tri_l.reshape(-1, 3), np.ascontiguousarray(co[loop_v[first]]), index, np.ascontiguousarray(uv[first])
+
+
+def _pack(vertices, index, uv, density: float, resolution: int = 0):
+    """xatlas's packing of the charts at `density` texels per unit, or scaled by xatlas for a
+    `resolution`² lightmap, into one atlas: where xatlas would spread them over several (whose UVs
+    would overlap in one layer) they are packed again at its scale into one that grows to fit.
+    Returns (the atlas's side, indices, corner UVs in 0..1 of the side, utilisation), or None when
+    xatlas finds no chart (every face without area: the bake leaves such a mesh out and says so)."""
+    import xatlas
+
+    for attempt in range(2):
+        atlas = xatlas.Atlas()
+        atlas.add_mesh(vertices, index, None, uv)
+        charts = xatlas.ChartOptions()
+        charts.use_input_mesh_uvs = True
+        pack = xatlas.PackOptions()
+        pack.texels_per_unit = float(density)
+        pack.resolution = int(resolution)
+        pack.padding = PADDING
+        pack.bilinear = True
+        atlas.generate(charts, pack)
+        if atlas.atlas_count == 1:
+            break
+        density, resolution = float(atlas.texels_per_unit), 0
+    if atlas.atlas_count == 0:  # no chart at all: every face without area
+        return None
+    _, indices, packed = atlas[0]
+    side = max(int(atlas.width), int(atlas.height), 1)
+    packed = np.asarray(packed, np.float32) * np.array([atlas.width / side, atlas.height / side], np.float32)
+    return side, np.asarray(indices, np.int64).reshape(-1, 3), packed, float(np.ravel(atlas.utilization)[0])
+
+
+def xatlas_unwrap(obj, layer: str, resolution: int = 0, density: float = 0.0) -> float:
+    """Charts from Smart UV Project (whole polygons, so every face keeps consistent UVs), packed by
+    xatlas with a PADDING-texel bilinear padding into `layer` (created or replaced; no other layer
+    changes): at `density` texels per metre (an atlas's objects), else for a `resolution`²
+    lightmap. UVs in 0..1 of the layout's longer side. Returns xatlas's utilisation."""
+    unwrap_into(obj, layer, lambda: bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0))
+    if not len(obj.data.polygons):
+        return 0.0
+    tri_l, vertices, index, uv = _welded(obj, layer)
+    packing = _pack(vertices, index, uv, density) if density > 0 else \
+        _pack(vertices, index, uv, 0.0, int(resolution or 128))
+    if packing is None:
+        return 0.0  # Smart UV Project's layer stays
+    _, indices, packed, used = packing
+    out = np.zeros((len(obj.data.loops), 2), np.float32)
+    out[tri_l] = packed[indices]
+    obj.data.uv_layers[layer].uv.foreach_set("vector", out.reshape(-1))
+    return used
 
 
 def remove_uv_layers(bl_scene, created: Iterable) -> None:

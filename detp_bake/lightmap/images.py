@@ -104,15 +104,24 @@ def file_stems(names) -> dict:
 
 
 def check_writable_dir(path: str | os.PathLike) -> Path:
-    """Create the output folder if needed and prove it is writable, before any long work."""
-    p = Path(path)
+    """Create the output folder if needed and prove it is writable, before any long work (the
+    bake's door, run/door.py, does it once)."""
+    p = output_folder(path)
     try:
-        p.mkdir(parents=True, exist_ok=True)
         probe = p / f".detp_bake_probe_{os.getpid()}"
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as exc:
         raise BakeError(f"output directory '{p}' is not writable: {exc.strerror or exc}") from None
-    # Absolute, so that images loaded from it keep pointing at it wherever the .blend is saved
-    # (Blender then stores them relative to the saved file: //lightmaps/…).
+    return p
+
+
+def output_folder(path: str | os.PathLike) -> Path:
+    """The output folder, created if needed, as an absolute path: images loaded from it keep pointing
+    at it wherever the .blend is saved (Blender then stores them relative to the saved file)."""
+    p = Path(path)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise BakeError(f"output directory '{p}' is not writable: {exc.strerror or exc}") from None
     return p.resolve()

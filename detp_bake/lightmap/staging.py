@@ -12,10 +12,17 @@ one of a bake still writing there.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 from pathlib import Path
 from typing import Callable
+
+try:
+    import fcntl
+except ImportError:  # Windows: no advisory locks on a folder
+    fcntl = None
+
 
 # The temporary names this module (and report.json's writers) give, `temporary`, and the folder
 # probe of images.check_writable_dir: each holds the writer's process id.
@@ -95,11 +102,14 @@ class FileSet:
         return self.stage(name, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
     def commit(self) -> None:
-        """Rename every staged file onto its target; what is left unrenamed on an error is removed."""
-        while self.staged:
-            tmp, target = self.staged[0]
-            os.replace(tmp, target)
-            self.staged.pop(0)
+        """Rename every staged file onto its target; what is left unrenamed on an error is removed.
+        One set at a time per folder (a lock on the folder itself): two bakes into one folder at
+        once leave all of one bake's files, the later one's, never some of each."""
+        with _folder_lock(self.folder):
+            while self.staged:
+                tmp, target = self.staged[0]
+                os.replace(tmp, target)
+                self.staged.pop(0)
 
     def discard(self) -> None:
         for tmp, _ in self.staged:
@@ -116,3 +126,18 @@ class FileSet:
         if kind is not None:
             self.discard()
         return False
+
+
+@contextlib.contextmanager
+def _folder_lock(folder: Path):
+    """An exclusive advisory lock (flock) on the folder, held while the block runs; nothing where
+    the system has none (Windows). The lock goes with the process: a killed bake holds none."""
+    if fcntl is None:
+        yield
+        return
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # closing the last descriptor releases the lock

@@ -340,11 +340,13 @@ def rasterise(scene: Scene) -> TexelSet:
         lm = Lightmap(name, index, res, res, offset, 0, 0.0, objects=tuple(members) if obj.image else ())
         sl = lightmap_triangles(scene, lm) if obj.image else obj.triangles
         first = sl if obj.image else int(obj.first_triangle)
-        pixel, tri, local, area, centre = _cover(lm, uv[sl], world_area[sl], res, first)
+        pixel, tri, local, area, centre, doubled = _cover(lm, uv[sl], world_area[sl], res, first)
         lm.charts, lm.chart_width, lm.border = charts_mod.chart_stats(uv[sl], scene.positions[sl], res, pixel, local)
         lm.count, lm.texel_size = len(pixel), _texel_size(world_area, uv_area, sl, res)
         if obj.image:
             lm.placement = _placement(scene, members, tri, pixel, res, world_area, uv_area)
+            charts_mod.into_placement(lm.placement, [scene.objects[i] for i in members], sl, uv[sl],
+                                      scene.positions[sl], res, pixel, local, doubled)
         # Positions and normals last, once the pixel grids are gone: the peak is what the TexelSet keeps.
         pos = np.empty((len(pixel), 3))
         nrm = np.empty((len(pixel), 3))
@@ -365,7 +367,7 @@ def rasterise(scene: Scene) -> TexelSet:
 
 def _cover(lm: Lightmap, uv: np.ndarray, world_area: np.ndarray, res: int, first) -> tuple:
     """Lightmap `lm`'s covered pixels, their triangles (in the scene, and as numbered in `uv`), the
-    world area on their squares (float32) and whether their centre lies on a triangle; sets its
+    world area on their squares (float32), whether their centre lies on a triangle and on two; sets its
     overlap and outside shares. `first`: the scene's number of uv's first triangle, or an atlas's
     triangle list. The (res², …) grids live only here (24 bytes a pixel)."""
     best_tri = np.full(res * res, -1, np.int32)
@@ -388,7 +390,7 @@ def _cover(lm: Lightmap, uv: np.ndarray, world_area: np.ndarray, res: int, first
     held = int(np.count_nonzero(inside))
     lm.overlap = float(np.count_nonzero(inside > 1)) / held if held else 0.0
     lm.outside = max(0.0, 1.0 - within / total) if total > 0 else 0.0
-    return pixel, tri, local, area, centre
+    return pixel, tri, local, area, centre, inside[pixel] > 1
 
 
 def of_objects(texels: TexelSet, names, scene: Scene | None = None) -> np.ndarray:

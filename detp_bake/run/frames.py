@@ -29,8 +29,8 @@ from typing import Callable, Iterable, Optional
 import numpy as np
 
 from .. import __version__
-from . import bake as bake_mod
-from ..lightmap import images, staging
+from . import bake as bake_mod, door
+from ..lightmap import staging
 from .incremental import digest as _digest, lights_signature, object_signatures  # noqa: F401  (frames' keys)
 from ..errors import BakeCancelled, BakeError
 from ..estimators import FrameState
@@ -149,8 +149,8 @@ def _frame_label(k: int, n: int, frame: int) -> str:
     return f"Frame {k + 1}/{n}" + ("" if frame == k + 1 else f" (#{frame})")
 
 
-def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: bake_mod.BakeSettings,
-                out_dir, progress: Optional[Callable[[bake_mod.Progress], None]] = None, cancel=None,
+def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange,
+                settings: bake_mod.BakeSettings | door.Admission, out_dir, progress: Optional[Callable[[bake_mod.Progress], None]] = None, cancel=None,
                 moving: Iterable[str] = (), static: Iterable[str] = (),
                 log: Callable[[str], None] = lambda message: None, force: bool = False, cluster=None) -> FramesResult:
     """Bake every frame of `frames` into `out_dir`. `scene_at(frame)` returns the scene at a frame.
@@ -160,8 +160,8 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
     over the range) are those of the last bake into `out_dir`, and whose files are all there, is
     not baked again but kept as it is (said, and marked in report.json); `force` bakes it anyway;
     `cluster` (a connected distributed.Cluster): every frame's photons are traced there."""
-    settings.validate()
-    out = images.check_writable_dir(out_dir)
+    admission = door.admitted(settings, out_dir=out_dir, frame_state=FrameState())  # checked once (door.py)
+    settings, out = admission.settings, admission.out_dir
     report, cancelled = progress or (lambda p: None), bake_mod.cancel_fn(cancel)
     numbers, t_start = frames.frames(), time.perf_counter()
     n = len(numbers)
@@ -209,7 +209,7 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange, settings: 
             if scene is None:
                 scene = scene_at(frame)
                 export_seconds[frame] += time.perf_counter() - t0
-            baked = bake_mod.compute(scene, settings, framed, cancel, cluster, frame_state=state)
+            baked = bake_mod.compute(scene, admission, framed, cancel, cluster, frame_state=state)
             baked.seconds["export"] = export_seconds[frame]
             baked.export = dict(getattr(scene, "export_stats", None) or {})
             bake_mod.write(baked, out, framed, cancel, frame=frame)

@@ -24,8 +24,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterator, Optional
 
-from . import bake as bake_mod, comparison, frames, incremental
-from ..lightmap import images, staging
+from . import bake as bake_mod, comparison, door, frames, incremental
+from ..lightmap import staging
 from ..transport import photons
 from ..errors import BakeCancelled, BakeError
 
@@ -174,13 +174,20 @@ class Job:
     on the worker thread as it is sent, in order with anything the worker prints (a command
     line's stderr), before the front end's own read of the queue."""
 
-    def __init__(self, scene, settings: bake_mod.BakeSettings, out_dir=None, names=None, *,
+    def __init__(self, scene, settings: bake_mod.BakeSettings | door.Admission, out_dir=None, names=None, *,
                  export_seconds: float = 0.0, preview: float = 0.0, warnings=(), cluster=None, listener=None,
                  reuse: bool = False, force: bool = False):
+        # An Admission (door.py) passed the door in the front end: its settings, estimators and folder
+        # are not checked again. Plain settings are checked on the worker (an Error event when bad).
+        self.admission = settings if isinstance(settings, door.Admission) else None
+        if self.admission is not None:
+            settings, out_dir = self.admission.settings, self.admission.out_dir
+            names = None if len(self.admission.names) == 1 and names is None else list(self.admission.names)
         self.kind = "bake" if names is None else "compare"
         self.names = [settings.estimator] if names is None else list(dict.fromkeys(names))
         self.scene = scene
         self.settings = settings
+        self.chosen = settings.photons  # the photons the job traces at most (chosen when it starts)
         self.out_dir = None if out_dir is None else Path(out_dir)
         self.export_seconds = export_seconds
         self.preview_interval = float(preview)
@@ -293,9 +300,10 @@ class Job:
     def _work(self) -> None:
         global _running
         try:
-            photons = bake_mod.auto_photons(self.scene, self.settings) if self.scene is not None else \
+            # The photons are chosen once, for the Started event and the bake alike (door.with_photons).
+            self.chosen = door.auto_photons(self.scene, self.settings) if self.scene is not None else \
                 self.settings.photons
-            self._send(Started(self.kind, list(self.names), photons,
+            self._send(Started(self.kind, list(self.names), self.chosen,
                                sum(o.bake for o in self.scene.objects) if self.scene is not None else 0))
             for message in self._warnings:
                 self._send(Notice(message))
@@ -324,11 +332,16 @@ class Job:
             self._warnings.append(message)
             self._send(Notice(message))
 
+    def _admitted(self, scene, reduced: bool) -> door.Admission:
+        """The door's admission (checked here unless the front end brought one), with the photons
+        chosen once: for the whole scene, or for what is left of it when lightmaps are reused."""
+        admission = self.admission or door.admit(self.settings, self.names, self.out_dir)
+        if self.settings.photons or not self.chosen:
+            return admission
+        chosen = door.auto_photons(scene, self.settings) if reduced else self.chosen
+        return replace(admission, settings=replace(admission.settings, photons=chosen), automatic=True)
+
     def _compute(self) -> Result:
-        for name in self.names:
-            replace(self.settings, estimator=name).validate()
-        if self.out_dir is not None:
-            images.check_writable_dir(self.out_dir)
         scene, plan = self.scene, None
         if self.reuse and self.kind == "bake" and self.out_dir is not None:
             plan = incremental.plan(scene, self.settings, self.out_dir, self.force)
@@ -336,9 +349,10 @@ class Job:
                 report = incremental.write_all_reused(plan, self.out_dir)
                 return Result({}, self.out_dir, report, reused={n: e["files"] for n, e in plan.reused.items()})
             scene = incremental.without(scene, plan.reused)
+        admission = self._admitted(scene, plan is not None and bool(plan.reused))
         connect = self.cluster is not None and getattr(self.cluster, "client", None) is None
         with (self.cluster if connect else contextlib.nullcontext(self.cluster)) as cluster:  # here, off the UI
-            results = bake_mod.compute_many(scene, self.settings, self.names, self._progress, self._cancel,
+            results = bake_mod.compute_many(scene, admission, None, self._progress, self._cancel,
                                             cluster=cluster, stop=self._stop.is_set,
                                             preview=self._preview if self.preview_interval > 0 else None,
                                             reach_of=list(plan.reused) if plan is not None else None)
@@ -392,8 +406,9 @@ class FramesJob(Job):
     def _compute(self) -> Result:
         connect = self.cluster is not None and getattr(self.cluster, "client", None) is None
         with (self.cluster if connect else contextlib.nullcontext(self.cluster)) as cluster:  # here, off the UI
-            done = frames.bake_frames(self.scene_at, self.frame_range, self.settings, self.out_dir, self._progress,
-                                      self._cancel, self.moving, self.static, self._note, self.force, cluster)
+            done = frames.bake_frames(self.scene_at, self.frame_range, self.admission or self.settings,
+                                      self.out_dir, self._progress, self._cancel, self.moving, self.static,
+                                      self._note, self.force, cluster)
         if not done.frames:
             raise BakeCancelled()
         return Result({}, self.out_dir, done.report_path, frames=done)

@@ -107,7 +107,7 @@ class BakeResult:
         if not lm.placement:
             return [{"name": lm.name, "texels": lm.count, "texel_size": lm.texel_size, **common,
                      **({"key": self.keys[lm.name], "reused": False} if lm.name in self.keys else {})}]
-        return [{"name": name, "image": lm.name, **place, **common,
+        return [{"name": name, "image": lm.name, **common, **place,  # its own charts, not the atlas's
                  **({"key": self.keys[name], "reused": False} if name in self.keys else {})}
                 for name, place in lm.placement.items()]
 

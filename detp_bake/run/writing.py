@@ -62,7 +62,7 @@ def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Cal
     before then leaves the folder as it was. Other files in the folder are left alone."""
     t0 = time.perf_counter()
     cancelled = cancel_fn(cancel)
-    out = images.check_writable_dir(out_dir)
+    out = images.output_folder(out_dir)  # proved writable at the door; a full disk is staging's to handle
     report = progress or (lambda p: None)
     paths = {name: output_paths(r, out, frame) for name, r in results.items()}
     number = "" if frame is None else f".{frame:04d}"
