@@ -289,3 +289,52 @@ def test_rays_start_within_the_reach_frame_ranges_allow_for():
     assert texels.centre_inside.any() and not texels.centre_inside.all()
     assert np.allclose(reach[texels.centre_inside], 0.5 * SPAN * step)
     assert np.allclose(reach[~texels.centre_inside], (0.5 + 0.5 * SPAN) * step)
+
+
+def _lamps(n, radius=0.0, seed=3):
+    """`n` point lights of different powers 0.5-1.5 m over the middle of a plane."""
+    rng = np.random.default_rng(seed)
+    at = np.column_stack([rng.uniform(-1.5, 1.5, n), rng.uniform(-1.5, 1.5, n), rng.uniform(0.5, 1.5, n)])
+    powers = rng.uniform(5.0, 50.0, n)
+    return [PointLight(f"Lamp{i}", at[i], np.full(3, powers[i]), radius) for i in range(n)]
+
+
+def test_many_point_lights_over_a_plane_sum_their_closed_forms():
+    """40 point lights (more than MANY_LIGHTS: sampled per texel by their weight, many_lights.py):
+    at the texel centres E = Σ I·h/(h²+ρ²)^{3/2} within 0.1 % (with nothing in the way the draw by
+    weight is exact); over the texels' squares, as the bake casts them, within 1 % on average of
+    every light's own rays (within 0.1 % over the plane), on a sixth of their rays."""
+    lamps = _lamps(40)
+    sc = make_scene([("Plane", grid(4.0, 4.0, 8), 0.5, True)], lamps, resolution=32)
+    texels, e, info = _direct(sc)
+    assert info["sampled_per_texel"] == 40
+    x = texels.position
+    expected = sum(l.power[0] / (4 * np.pi) * l.position[2] /
+                   (l.position[2] ** 2 + (x[:, 0] - l.position[0]) ** 2 + (x[:, 1] - l.position[1]) ** 2) ** 1.5
+                   for l in lamps)
+    assert np.abs(e[:, 0] / expected - 1).max() < 1e-3
+    _, spread, info = _direct(sc, spread=True)
+    own, every = direct_irradiance(sc, texels, RayCaster(sc.positions), 16, 0, 1, spread=True, many_from=10 ** 6)
+    assert np.abs(spread[:, 0] / own[:, 0] - 1).mean() < 0.01
+    assert abs(spread[:, 0].sum() / own[:, 0].sum() - 1) < 0.001
+    assert info["rays"] < every["rays"] / 6
+
+
+def test_many_lights_are_unbiased_in_the_mean_where_shadows_fall():
+    """Sphere lights over a plane with a square held above it: the per-texel draw among the lights
+    (with rays of their own for the few that give a texel most of its light) averages, over seeds,
+    to what every light's own rays give (64 rays each); each seed alone is noisy under the square's
+    shadows."""
+    lamps = _lamps(30, radius=0.2, seed=5)
+    sc = make_scene([("Plane", grid(4.0, 4.0, 8), 0.5, True), ("Blocker", grid(1.2, 1.2, 1, z=0.3), 0.5, False)],
+                    lamps, resolution=24)
+    texels = rasterise(sc)
+    caster = RayCaster(sc.positions)
+    ref, info = direct_irradiance(sc, texels, caster, 64, 0, 1, spread=False, many_from=10 ** 6)
+    assert "sampled_per_texel" not in info
+    runs = [direct_irradiance(sc, texels, caster, 16, seed, 1, spread=False)[0][:, 0] for seed in range(8)]
+    rms = lambda a: np.sqrt(np.mean((a - ref[:, 0]) ** 2)) / np.sqrt(np.mean(ref[:, 0] ** 2))  # noqa: E731
+    one = np.mean([rms(run) for run in runs])
+    assert one > 0.01  # each seed is noisy under the shadows (7 %; every light's own rays: 0.35 %)
+    assert rms(np.mean(runs, axis=0)) < 0.5 * one  # the noise averages out (1/√8 = 0.35): no bias left
+    assert abs(np.mean(runs, axis=0).sum() / ref[:, 0].sum() - 1) < 0.002

@@ -15,7 +15,7 @@ from .materials import Surface, read_surface
 from .world import export_world
 from .atlas import ATLAS_UV, pack as atlas_pack
 from .identity import fingerprints
-from .uv import check_can_add, ensure_lightmap_uv
+from .uv import check_can_add, ensure_lightmap_uvs
 
 
 def material_surface(mat) -> Surface:
@@ -133,19 +133,17 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
             raise BakeError(f"object '{obj.name}' has no UV layer '{layer}'")
     layers = {o.name: named.get(o.name) or DEFAULT_UV for o in targets}
     in_atlas = atlas is not None and atlas.lightmaps == "atlas"
-    made = []
     for obj in targets:
         check_can_add(obj, layers[obj.name])
         if in_atlas:
             check_can_add(obj, ATLAS_UV)
-    for obj in targets:
-        size = resolution.get(obj.name, 0) if isinstance(resolution, dict) else resolution
-        density = atlas.texel_density * (obj.detp_bake.density_scale if hasattr(obj, "detp_bake") else 1.0) \
-            if in_atlas else 0.0
-        if ensure_lightmap_uv(obj, layers[obj.name], int(size or 0), density):
-            made.append(obj.name)
-            if created is not None:
-                created.append((obj.name, layers[obj.name]))
+    sizes = {o.name: int((resolution.get(o.name, 0) if isinstance(resolution, dict) else resolution) or 0)
+             for o in targets}
+    densities = {o.name: atlas.texel_density * (o.detp_bake.density_scale if hasattr(o, "detp_bake") else 1.0)
+                 for o in targets} if in_atlas else {}
+    made = ensure_lightmap_uvs(targets, layers, sizes, densities)
+    if created is not None:
+        created.extend((name, layers[name]) for name in made)
     if made:
         log(f"created UV layer '{layers[made[0]]}' with xatlas charts on {', '.join(made[:5])}"
             + (f" and {len(made) - 5} more" if len(made) > 5 else ""))

@@ -141,6 +141,11 @@ def xatlas_unwrap(obj, layer: str, resolution: int = 0, density: float = 0.0) ->
     changes): at `density` texels per metre (an atlas's objects), else for a `resolution`²
     lightmap. UVs in 0..1 of the layout's longer side. Returns xatlas's utilisation."""
     unwrap_into(obj, layer, lambda: bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0))
+    return _xatlas_charts(obj, layer, resolution, density)
+
+
+def _xatlas_charts(obj, layer: str, resolution: int, density: float) -> float:
+    """`xatlas_unwrap` once Smart UV Project's charts are in `layer`."""
     if not len(obj.data.polygons):
         return 0.0
     tri_l, vertices, index, uv = _welded(obj, layer)
@@ -153,6 +158,62 @@ def xatlas_unwrap(obj, layer: str, resolution: int = 0, density: float = 0.0) ->
     out[tri_l] = packed[indices]
     obj.data.uv_layers[layer].uv.foreach_set("vector", out.reshape(-1))
     return used
+
+
+def ensure_lightmap_uvs(objects, layers: dict, sizes: dict, densities: dict) -> list:
+    """`ensure_lightmap_uv` for many objects ({object name: layer, lightmap size, texel density}):
+    Smart UV Project once for all of them, in one edit-mode session, then xatlas per object. One
+    session per object cost 0.1-0.15 s each, most of it the view-layer update Blender runs around
+    every operator call, which grows with the objects in the scene (1,500 crates: 94 s). The names
+    of the objects whose layer was created, in order."""
+    todo, meshes = [], set()
+    for obj in objects:
+        if layers[obj.name] not in obj.data.uv_layers and obj.data.as_pointer() not in meshes:
+            meshes.add(obj.data.as_pointer())
+            todo.append(obj)
+    one_by_one = len(todo) < 2 or len({layers[o.name] for o in todo}) > 1 or \
+        any(o.mode != "OBJECT" or not o.visible_get() for o in todo)
+    if one_by_one:
+        return [o.name for o in objects
+                if ensure_lightmap_uv(o, layers[o.name], sizes.get(o.name, 0), densities.get(o.name, 0.0))]
+    layer = layers[todo[0].name]
+    _smart_project(todo, layer)
+    for obj in todo:
+        _xatlas_charts(obj, layer, sizes.get(obj.name, 0), densities.get(obj.name, 0.0))
+    return [o.name for o in todo]
+
+
+def _smart_project(objects: list, layer: str) -> None:
+    """Smart UV Project into `layer` (created) of every object, all in edit mode at once; the
+    selection, the active object and each mesh's active UV layer are kept."""
+    view_layer = bpy.context.view_layer
+    selected = [o for o in view_layer.objects if o.select_get()]
+    active = view_layer.objects.active
+    previous = {}
+    for obj in objects:
+        me = obj.data
+        previous[obj.name] = me.uv_layers.active.name if me.uv_layers.active else None
+        me.uv_layers.active = me.uv_layers.new(name=layer)
+    try:
+        for other in selected:
+            other.select_set(False)
+        for obj in objects:
+            obj.select_set(True)
+        view_layer.objects.active = objects[0]
+        bpy.ops.object.mode_set(mode="EDIT")
+        bpy.ops.mesh.select_all(action="SELECT")
+        bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0)
+        bpy.ops.object.mode_set(mode="OBJECT")
+    finally:
+        for obj in objects:
+            obj.select_set(False)
+        for other in selected:
+            other.select_set(True)
+        view_layer.objects.active = active
+        for obj in objects:
+            me, name = obj.data, previous[obj.name]
+            if name is not None and name in me.uv_layers:
+                me.uv_layers.active = me.uv_layers[name]
 
 
 def remove_uv_layers(bl_scene, created: Iterable) -> None:

@@ -38,14 +38,13 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Optional
 
-import numba
 import numpy as np
 
 from ..errors import BakeCancelled
-from .lights import spot_factor
-from .direct_lights import AREA, MESH, POINT, SHARP_KINDS, SUN, WORLD_MAP, direct_lights
-from ..sampling import (cone_lobe, cosine_hemisphere, in_frame, inline, jit, orthonormal_basis, photon_rng,
-    search_cdf, seed_key, uniform2, uniform_disc, uniform_triangle)
+from .direct_lights import (AREA, FAR, MESH, POINT, SHARP_KINDS, SUN, WORLD_MAP, direct_lights, light_ray,
+    light_weight, radical_inverse2, towards)
+from .many_lights import MANY_LIGHTS, ManyLights
+from ..sampling import cosine_hemisphere, jit, photon_rng, search_cdf, seed_key, uniform2, uniform_triangle
 from .environment import environment_rays
 from .scattering import MAX_PASSES
 from ..scene import Scene
@@ -53,34 +52,9 @@ from .textures import opacity_at, surfaces
 from ..lightmap.texel_area import area_point, texel_squares
 from ..lightmap.texels import geometric_normals
 
-FAR = 1e37
 CHUNK = 2048  # texels per work item
 DEFAULT_SAMPLES = 16
 DISAGREE = 0.05  # a sharp light adds rays where its first ones differ by more than this share (direct_lights)
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _radical_inverse2(j):
-    """Van der Corput in base 2: the second coordinate of a Hammersley set."""
-    x = np.uint32(j)
-    x = ((x << np.uint32(16)) | (x >> np.uint32(16)))
-    x = ((x & np.uint32(0x55555555)) << np.uint32(1)) | ((x & np.uint32(0xAAAAAAAA)) >> np.uint32(1))
-    x = ((x & np.uint32(0x33333333)) << np.uint32(2)) | ((x & np.uint32(0xCCCCCCCC)) >> np.uint32(2))
-    x = ((x & np.uint32(0x0F0F0F0F)) << np.uint32(4)) | ((x & np.uint32(0xF0F0F0F0)) >> np.uint32(4))
-    x = ((x & np.uint32(0x00FF00FF)) << np.uint32(8)) | ((x & np.uint32(0xFF00FF00)) >> np.uint32(8))
-    return np.float64(x) * (1.0 / 4294967296.0)
-
-
-@inline
-def _towards(sx, sy, sz, nx, ny, nz):
-    """The unit direction to a point at offset (sx, sy, sz), its squared distance and distance, and
-    its cosine with the normal n; all 0 when the offset is 0."""
-    d2 = sx * sx + sy * sy + sz * sz
-    if d2 <= 0.0:
-        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    dist = math.sqrt(d2)
-    dx, dy, dz = sx / dist, sy / dist, sz / dist
-    return dx, dy, dz, d2, dist, dx * nx + dy * ny + dz * nz
 
 
 @jit
@@ -112,84 +86,22 @@ def _shadow_rays(kind, prm, j0, samples, stride, sel, counts, key, ids, a, b, po
             ox, oy, oz = px + eps * gx, py + eps * gy, pz + eps * gz
             u0 = (j + 0.5) * inv_s + r0
             u0 -= math.floor(u0)
-            u1 = _radical_inverse2(j) + r1
+            u1 = radical_inverse2(j) + r1
             u1 -= math.floor(u1)
             w0 = w1 = w2 = 0.0
             dx = dy = dz = 0.0
             far = FAR
-            if kind == POINT:
-                cx, cy, cz = prm[0] - ox, prm[1] - oy, prm[2] - oz
-                d2 = cx * cx + cy * cy + cz * cz
-                dist = math.sqrt(d2)
-                if dist <= 0.0:
+            if kind == POINT or kind == SUN or kind == AREA:
+                ok, dx, dy, dz, far, w0, w1, w2 = light_ray(kind, prm, ox, oy, oz, nx, ny, nz, u0, u1, inv_s)
+                if not ok:
                     continue
-                ax, ay, az = cx / dist, cy / dist, cz / dist  # towards the light's centre
-                att = 1.0
-                if prm[12] > 0.0:  # spot: the angle between its axis and the way to the texel
-                    att = spot_factor(-(ax * prm[7] + ay * prm[8] + az * prm[9]), prm[10], prm[11])
-                    if att <= 0.0:
-                        continue
-                radius = prm[6]
-                if radius > 0.0 and dist > radius:
-                    # A sphere: directions uniform in its cone, radiance P/(4π²r²) each.
-                    sin2 = radius * radius / d2
-                    cos_max = math.sqrt(max(0.0, 1.0 - sin2))
-                    lx, ly, lz = cone_lobe(cos_max, u0, u1)
-                    ts, ss = orthonormal_basis(ax, ay, az)
-                    dx, dy, dz = in_frame(lx, ly, lz, ts, ss, (ax, ay, az))
-                    cos_x = dx * nx + dy * ny + dz * nz
-                    if cos_x <= 0.0:
-                        continue
-                    # E = L·Ω·E[cos]; L·Ω = I/r² · (1 − cos_max)·2π/π = 2·I·(1 − cos_max)/r².
-                    scale = 2.0 * (1.0 - cos_max) / (radius * radius) * cos_x * att * inv_s
-                    # distance to the sphere along d (the near root)
-                    b_ = dx * cx + dy * cy + dz * cz
-                    disc = b_ * b_ - (d2 - radius * radius)
-                    far = b_ - math.sqrt(max(disc, 0.0))
-                else:
-                    dx, dy, dz = ax, ay, az
-                    cos_x = dx * nx + dy * ny + dz * nz
-                    if cos_x <= 0.0:
-                        continue
-                    scale = cos_x / d2 * att * inv_s
-                    far = dist
-                w0, w1, w2 = prm[3] * scale, prm[4] * scale, prm[5] * scale
-            elif kind == SUN:
-                if prm[6] < 1.0:
-                    ts, ss = orthonormal_basis(prm[0], prm[1], prm[2])
-                    lx, ly, lz = cone_lobe(prm[6], u0, u1)
-                    dx, dy, dz = in_frame(lx, ly, lz, ts, ss, (prm[0], prm[1], prm[2]))
-                else:
-                    dx, dy, dz = prm[0], prm[1], prm[2]
-                cos_x = dx * nx + dy * ny + dz * nz
-                if cos_x <= 0.0:
-                    continue
-                scale = cos_x * inv_s
-                w0, w1, w2 = prm[3] * scale, prm[4] * scale, prm[5] * scale
-            elif kind == AREA:
-                if prm[17] > 0.0:
-                    qx, qy = uniform_disc(u0, u1)
-                    lx, ly = 0.5 * prm[15] * qx, 0.5 * prm[16] * qy
-                else:
-                    lx, ly = (u0 - 0.5) * prm[15], (u1 - 0.5) * prm[16]
-                dx, dy, dz, d2, dist, cos_x = _towards(prm[0] * lx + prm[1] * ly + prm[3] - ox,
-                                                       prm[4] * lx + prm[5] * ly + prm[7] - oy,
-                                                       prm[8] * lx + prm[9] * ly + prm[11] - oz, nx, ny, nz)
-                if d2 <= 0.0:
-                    continue
-                cos_l = -(dx * prm[12] + dy * prm[13] + dz * prm[14])
-                if cos_x <= 0.0 or cos_l <= 0.0:
-                    continue
-                scale = cos_x * cos_l / d2 * inv_s
-                w0, w1, w2 = prm[18] * scale, prm[19] * scale, prm[20] * scale
-                far = dist
             elif kind == MESH:
                 lo = search_cdf(cdf, u0)
                 below = cdf[lo - 1] if lo > 0 else 0.0
                 v0 = (u0 - below) / max(cdf[lo] - below, 1e-300)
                 v0 = min(max(v0, 0.0), 0.999999999)
                 b0, b1, b2 = uniform_triangle(v0, u1)
-                dx, dy, dz, d2, dist, cos_x = _towards(
+                dx, dy, dz, d2, dist, cos_x = towards(
                     b0 * tpos[lo, 0, 0] + b1 * tpos[lo, 1, 0] + b2 * tpos[lo, 2, 0] - ox,
                     b0 * tpos[lo, 0, 1] + b1 * tpos[lo, 1, 1] + b2 * tpos[lo, 2, 1] - oy,
                     b0 * tpos[lo, 0, 2] + b1 * tpos[lo, 1, 2] + b2 * tpos[lo, 2, 2] - oz, nx, ny, nz)
@@ -231,29 +143,7 @@ def light_shares(kinds, params, samples, a, b, pos, nrm, out):
         nx, ny, nz = nrm[i, 0], nrm[i, 1], nrm[i, 2]
         total = 0.0
         for q in range(m):
-            prm = params[q]
-            kind = kinds[q]
-            wq = 0.0
-            if kind == SUN:
-                c = prm[0] * nx + prm[1] * ny + prm[2] * nz
-                wq = (prm[3] + prm[4] + prm[5]) * max(c, 0.05)
-            else:
-                if kind == POINT:
-                    cx, cy, cz = prm[0] - pos[i, 0], prm[1] - pos[i, 1], prm[2] - pos[i, 2]
-                    size2 = prm[6] * prm[6]
-                    power = prm[3] + prm[4] + prm[5]
-                else:  # AREA: its centre, its emitting side
-                    cx, cy, cz = prm[3] - pos[i, 0], prm[7] - pos[i, 1], prm[11] - pos[i, 2]
-                    size2 = 0.25 * prm[15] * prm[16]
-                    power = prm[18] + prm[19] + prm[20]
-                d2 = cx * cx + cy * cy + cz * cz
-                dist = math.sqrt(max(d2, 1e-300))
-                c = (cx * nx + cy * ny + cz * nz) / dist
-                if kind == AREA:
-                    c *= max(-(cx * prm[12] + cy * prm[13] + cz * prm[14]) / dist, 0.05)
-                if kind == POINT and prm[12] > 0.0:
-                    c *= max(spot_factor(-(cx * prm[7] + cy * prm[8] + cz * prm[9]) / dist, prm[10], prm[11]), 0.05)
-                wq = power * max(c, 0.05) / max(d2, size2)
+            wq = light_weight(kinds[q], params[q], pos[i, 0], pos[i, 1], pos[i, 2], nx, ny, nz)
             weight[q] = wq
             total += wq
         left = budget - m
@@ -370,7 +260,7 @@ class _DirectWork:
     per texel (random streams, geometric normals, squares) once per chunk (`inputs`)."""
 
     def __init__(self, scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel,
-                 l1=None, sharp_l1=None, masked=None, mask=None, leave_out=True):
+                 l1=None, sharp_l1=None, masked=None, mask=None, leave_out=True, many_from=MANY_LIGHTS):
         self.caster, self.lights, self.samples, self.seed, self.spread = caster, lights, samples, seed, spread
         self.out, self.sharp, self.progress, self.cancel, self.l1 = out, sharp, progress, cancel, l1
         self.sharp_l1 = sharp_l1
@@ -392,9 +282,12 @@ class _DirectWork:
         self.positions = np.ascontiguousarray(scene.positions, np.float32)
         self.eps = scene.ray_offset()
         self.srf = surfaces(scene)
-        # Lights with extent share one budget per texel, by what each would give it unshadowed.
-        shared = [i for i, l in enumerate(lights) if l.kind in (POINT, SUN, AREA) and not l.extra and l.samples > 1] \
-            if select else []
+        # Many lights: sampled per texel by what each would give it (many_lights.py); else those with
+        # extent share one budget per texel, by what each would give it unshadowed.
+        many = [i for i, l in enumerate(lights) if l.kind in (POINT, SUN, AREA) and i not in self.masked]
+        self.many = ManyLights(lights, many, samples, seed) if select and len(many) > many_from else None
+        shared = [i for i, l in enumerate(lights) if l.kind in (POINT, SUN, AREA) and not l.extra and l.samples > 1
+                  and (self.many is None or i not in self.many.indices)] if select else []
         self.shared = shared if len(shared) >= 2 else []
         self.kinds = np.array([lights[i].kind for i in self.shared], np.int64)
         self.params = np.array([lights[i].params for i in self.shared], np.float64) if self.shared \
@@ -419,6 +312,7 @@ class _DirectWork:
         at = self.inputs(a, b)
         lights, shared, sharp = self.lights, self.shared, self.sharp
         most = (b - a) * max(max(l.samples, l.extra) for l in lights) * (len(shared) if shared else 1)
+        most = 0 if self.many is not None and len(self.many.indices) == len(lights) else most
         buffers = (np.empty((most, 3), np.float32), np.empty((most, 3), np.float32), np.empty(most, np.float32),
                    np.empty((most, 3)), np.empty(most, np.int64))
         acc = np.zeros((b - a, 3))
@@ -429,7 +323,20 @@ class _DirectWork:
         if shared:
             shares = np.empty((b - a, len(shared)), np.int64)
             light_shares(self.kinds, self.params, self.samples, 0, b - a, at[1], at[2], shares)
+        if self.many is not None:
+            got, got_sharp, got_l1, got_sharp_l1, k = self.many.chunk(self, at, b - a, acc_l1 is not None,
+                                                                     sharp_l1 is not None)
+            self.rays[index] += k
+            acc += got
+            if sharp_acc is not None:
+                sharp_acc += got_sharp
+            if acc_l1 is not None:
+                acc_l1 += got_l1
+            if sharp_l1 is not None:
+                sharp_l1 += got_sharp_l1
         for li, light in enumerate(lights):
+            if self.many is not None and li in self.many.indices:
+                continue
             counts = shares[:, shared.index(li)].copy() if li in shared else _NONE
             own, own_l1, free = self.light(index, at, buffers, li, light, counts)
             if li in self.masked:
@@ -481,6 +388,12 @@ class _DirectWork:
                         mine[mixed] = (n0 * mine[mixed] + n1 * extra[mixed]) / (n0 + n1)
         return own
 
+    def arrived(self, o, d, t) -> np.ndarray:
+        """The share of each ray's light that arrives: 0 or 1, or through cut-outs a fraction."""
+        if self.srf.cutout:
+            return transmittance(self.caster, self.srf, o, d, t, self.eps)
+        return (self.caster.occluded(o, d, t) < 0).astype(np.float64)
+
     def cast(self, index, at, buffers, light, key, j0, count, sel, into, counts=None, into_l1=None, into_free=None):
         """Rays of `light` (samples j0 … j0 + count − 1) for chunk `index` (its texels `at`, from
         `inputs`; `sel` counts from the chunk's first) into `into` (and their directions into
@@ -529,7 +442,7 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
                       select: bool = True, sharp: Optional[np.ndarray] = None,
                       l1: Optional[np.ndarray] = None, sharp_l1: Optional[np.ndarray] = None,
                       shadowmask=(), mask: Optional[np.ndarray] = None,
-                      leave_out: bool = True) -> tuple[np.ndarray, dict]:
+                      leave_out: bool = True, many_from: int = MANY_LIGHTS) -> tuple[np.ndarray, dict]:
     """Direct irradiance E (N, 3) W/m² at every texel, and counters for report.json. Each chunk
     sums its texels' rays in float64 and stores them as float32: the value is only stored until
     the estimate is added to it, and float32 holds it to the precision of the lightmap images.
@@ -548,7 +461,8 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     visibility goes into `mask` ((N, 4) float32, one column each, in that order): the share of the
     light's unshadowed irradiance that its shadow rays bring, 1 where it would bring none; with
     `leave_out` their direct light is left out of the result (the real light times the mask adds
-    it back at render time)."""
+    it back at render time). More than `many_from` point, spot, sun and area lights (not masked)
+    are sampled per texel by what each gives it (many_lights.py)."""
     t0 = time.perf_counter()
     lights = direct_lights(scene, int(samples), spread)
     n = len(texels)
@@ -558,7 +472,7 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
     names = [light.name for light in lights]
     masked = {names.index(name): column for column, name in enumerate(shadowmask)}
     work = _DirectWork(scene, texels, caster, lights, samples, seed, spread, select, out, sharp, progress, cancel, l1,
-                       sharp_l1 if sharp is not None and l1 is not None else None, masked, mask, leave_out)
+                       sharp_l1 if sharp is not None and l1 is not None else None, masked, mask, leave_out, many_from)
     if threads > 1 and len(work.chunks) > 1:
         with ThreadPoolExecutor(threads) as pool:
             for f in [pool.submit(work.chunk, i) for i in range(len(work.chunks))]:
@@ -577,5 +491,8 @@ def direct_irradiance(scene: Scene, texels, caster, samples: int = DEFAULT_SAMPL
             if part is not None:
                 part[cuts.covered] = 0.0
     rays, shared = work.rays, work.shared
-    return out, {"lights": len(lights), "samples": int(samples), "rays": int(sum(rays)), "shared": len(shared),
-                 "seconds": time.perf_counter() - t0}
+    info = {"lights": len(lights), "samples": int(samples), "rays": int(sum(rays)), "shared": len(shared),
+            "seconds": time.perf_counter() - t0}
+    if work.many is not None:
+        info["sampled_per_texel"] = len(work.many.indices)
+    return out, info
