@@ -114,12 +114,13 @@ def test_ctrl_c_keeps_the_finished_frames(tmp_path):
     lists it, nothing of the second frame, no hidden temporary file."""
     import signal
 
-    from test_robustness import _start, _wait_for
+    from battery import wait_for
+    from test_robustness import _start
 
     out = tmp_path / "out"
     proc = _start(["bake", str(QUASI_STATIC), "--frames", "1-3", "--out", str(out), "--photons", "1500000",
                    "--resolution", "16", "--no-denoise", "--estimator", "hybrid"], tmp_path)
-    seen = _wait_for(proc, "Frame 1/3 · written")  # frame 2 has a second or more of tracing ahead
+    seen = wait_for(proc, "Frame 1/3 · written")  # frame 2 has a second or more of tracing ahead
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 130, "".join(seen) + stderr
