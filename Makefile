@@ -39,10 +39,11 @@ $(VENVCORE)/.installed: requirements/blender-4.5.txt
 	$(VENVCORE)/bin/python -m pip install -q -r $(VENVCORE)/requirements.txt
 	touch $@
 
-# It writes the tests it skipped for want of bpy to NEEDS_BLENDER (tests/conftest.py).
+# It writes the tests it skipped for want of bpy to NEEDS_BLENDER (tests/conftest.py). Its kernels go to the
+# 4.5 line's numba cache (the same CPython, numba and numpy): the Blender half that follows loads them.
 NEEDS_BLENDER := .cache/needs-blender.txt
 test-core: $(VENVCORE)/.installed
-	DETP_BAKE_NEEDS_BLENDER=$(CURDIR)/$(NEEDS_BLENDER) NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-core-$(CORE_HASH) \
+	DETP_BAKE_NEEDS_BLENDER=$(CURDIR)/$(NEEDS_BLENDER) NUMBA_CACHE_DIR=$(CURDIR)/.cache/numba-4.5-$(CORE_HASH) \
 		$(VENVCORE)/bin/python -m pytest tests -q -p no:cacheprovider $(PYTEST_ARGS)
 
 env: $(VENV45)/.installed
