@@ -28,6 +28,7 @@ import time
 import types
 import uuid
 import zipfile
+from concurrent.futures import CancelledError
 from pathlib import Path
 from typing import Callable, Iterator, Optional
 
@@ -175,21 +176,26 @@ class Cluster:
                     news.wait(0.2)
                     news.clear()
                 finished = {i: f for i, f in out.items() if f.done()}
-                for i, f in list(finished.items()):
-                    if f.status == "cancelled" and again.get(i, 0) < RESEND:
-                        # The scheduler dropped it: a worker that died held the only copy of the
-                        # bake (broadcast reaches the workers there at the time). Send both again.
+                if finished:
+                    resubmitted += self._resubmitted([f.key for f in finished.values()])
+                for i, f in finished.items():
+                    try:
+                        if f.status == "cancelled":
+                            raise CancelledError(f.key)
+                        if f.status != "finished":
+                            raise BakeError(_failure(f, units[i]))
+                        done[i] = f.result()
+                    except CancelledError:  # distributed.FutureCancelledError is one
+                        # The scheduler dropped it, before or after it ran: a worker that died held the
+                        # only copy of the bake (broadcast reaches the workers there at the time) or of
+                        # the result, not gathered yet. Send both again.
+                        if again.get(i, 0) >= RESEND:
+                            raise BakeError(_failure(f, units[i])) from None
                         again[i] = again.get(i, 0) + 1
                         payloads.extend(client.scatter([data], broadcast=True, hash=False))
                         out[i] = submit(i)
                         resubmitted += 1
-                        del finished[i]
-                    elif f.status != "finished":
-                        raise BakeError(_failure(f, units[i]))
-                if finished:
-                    resubmitted += self._resubmitted([f.key for f in finished.values()])
-                for i, f in finished.items():
-                    done[i] = f.result()
+                        continue
                     del out[i]  # released: the worker forgets the result
                     photons += sum(p["stats"]["photons"] for p in done[i])
                     progress(photons)
