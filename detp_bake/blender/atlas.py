@@ -16,12 +16,11 @@ import hashlib
 import json
 import os
 
-import bpy
 import numpy as np
 
 from ..errors import BakeError
 from ..lightmap import atlas as atlas_mod
-from .uv import mesh_arrays, unwrap_into
+from .uv import mesh_arrays, smart_project, unwrap_into
 
 ATLAS_UV = "LightmapAtlas"
 SMART_UV = "detp_bake smart islands"
@@ -73,7 +72,7 @@ def _islands(obj, layer: str, charts: str):
     """The triangles and the UVs whose islands are packed: the layer's, or Smart UV Project's."""
     if charts != "smart":
         return _triangles(obj, layer)
-    unwrap_into(obj, SMART_UV, lambda: bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0))
+    unwrap_into(obj, SMART_UV, smart_project)
     try:
         return _triangles(obj, SMART_UV)
     finally:

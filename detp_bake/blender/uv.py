@@ -18,33 +18,46 @@ from ..errors import BakeError
 PADDING = 2  # texels between xatlas charts: no texel shared under bilinear filtering
 
 
-def unwrap_into(obj, uv_name: str, unwrap: Callable[[], None]) -> None:
-    """Run a UV operator (`unwrap`, called in edit mode with all faces selected) into `uv_name`,
-    creating the layer if needed; the active UV layer, selection and mode are restored."""
-    me = obj.data
-    previous = me.uv_layers.active.name if me.uv_layers.active else None
+def unwrap_into(objects, uv_name: str, unwrap: Callable[[], None]) -> None:
+    """Run a UV operator (`unwrap`, called once in edit mode with all faces of `objects` selected: one
+    object or a list) into `uv_name`, creating the layer where needed; each mesh's active UV layer,
+    the selection and the mode are restored."""
+    objects = list(objects) if isinstance(objects, (list, tuple)) else [objects]
     view_layer = bpy.context.view_layer
     selected = [o for o in view_layer.objects if o.select_get()]
     active = view_layer.objects.active
-    if uv_name not in me.uv_layers:
-        me.uv_layers.new(name=uv_name)
-    me.uv_layers.active = me.uv_layers[uv_name]
+    previous = {}
+    for obj in objects:
+        me = obj.data
+        previous[obj.name] = me.uv_layers.active.name if me.uv_layers.active else None
+        if uv_name not in me.uv_layers:
+            me.uv_layers.new(name=uv_name)
+        me.uv_layers.active = me.uv_layers[uv_name]
     try:
         for other in selected:
             other.select_set(False)
-        obj.select_set(True)
-        view_layer.objects.active = obj
+        for obj in objects:
+            obj.select_set(True)
+        view_layer.objects.active = objects[0]
         bpy.ops.object.mode_set(mode="EDIT")
         bpy.ops.mesh.select_all(action="SELECT")
         unwrap()
         bpy.ops.object.mode_set(mode="OBJECT")
     finally:
-        obj.select_set(False)
+        for obj in objects:
+            obj.select_set(False)
         for other in selected:
             other.select_set(True)
         view_layer.objects.active = active
-    if previous is not None and previous in me.uv_layers:
-        me.uv_layers.active = me.uv_layers[previous]
+    for obj in objects:
+        me, name = obj.data, previous[obj.name]
+        if name is not None and name in me.uv_layers:
+            me.uv_layers.active = me.uv_layers[name]
+
+
+def smart_project() -> None:
+    """Smart UV Project as every unwrap here runs it (in edit mode): charts of whole polygons."""
+    bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0)
 
 
 def check_can_add(obj, uv_name: str) -> None:
@@ -140,7 +153,7 @@ def xatlas_unwrap(obj, layer: str, resolution: int = 0, density: float = 0.0) ->
     xatlas with a PADDING-texel bilinear padding into `layer` (created or replaced; no other layer
     changes): at `density` texels per metre (an atlas's objects), else for a `resolution`²
     lightmap. UVs in 0..1 of the layout's longer side. Returns xatlas's utilisation."""
-    unwrap_into(obj, layer, lambda: bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0))
+    unwrap_into(obj, layer, smart_project)
     return _xatlas_charts(obj, layer, resolution, density)
 
 
@@ -177,43 +190,10 @@ def ensure_lightmap_uvs(objects, layers: dict, sizes: dict, densities: dict) -> 
         return [o.name for o in objects
                 if ensure_lightmap_uv(o, layers[o.name], sizes.get(o.name, 0), densities.get(o.name, 0.0))]
     layer = layers[todo[0].name]
-    _smart_project(todo, layer)
+    unwrap_into(todo, layer, smart_project)  # one edit-mode session for all
     for obj in todo:
         _xatlas_charts(obj, layer, sizes.get(obj.name, 0), densities.get(obj.name, 0.0))
     return [o.name for o in todo]
-
-
-def _smart_project(objects: list, layer: str) -> None:
-    """Smart UV Project into `layer` (created) of every object, all in edit mode at once; the
-    selection, the active object and each mesh's active UV layer are kept."""
-    view_layer = bpy.context.view_layer
-    selected = [o for o in view_layer.objects if o.select_get()]
-    active = view_layer.objects.active
-    previous = {}
-    for obj in objects:
-        me = obj.data
-        previous[obj.name] = me.uv_layers.active.name if me.uv_layers.active else None
-        me.uv_layers.active = me.uv_layers.new(name=layer)
-    try:
-        for other in selected:
-            other.select_set(False)
-        for obj in objects:
-            obj.select_set(True)
-        view_layer.objects.active = objects[0]
-        bpy.ops.object.mode_set(mode="EDIT")
-        bpy.ops.mesh.select_all(action="SELECT")
-        bpy.ops.uv.smart_project(angle_limit=1.15, island_margin=0.0)
-        bpy.ops.object.mode_set(mode="OBJECT")
-    finally:
-        for obj in objects:
-            obj.select_set(False)
-        for other in selected:
-            other.select_set(True)
-        view_layer.objects.active = active
-        for obj in objects:
-            me, name = obj.data, previous[obj.name]
-            if name is not None and name in me.uv_layers:
-                me.uv_layers.active = me.uv_layers[name]
 
 
 def remove_uv_layers(bl_scene, created: Iterable) -> None:
