@@ -9,8 +9,8 @@ import pytest
 CORE = Path(__file__).resolve().parents[1] / "detp_bake"
 # A folder may import its own modules and those of folders of a lower rank; blender/ (the adapter)
 # reads the core's data types and lights, and only the command line reaches into it (lazily).
-RANK = {"base": 0, "lightmap": 1, "transport": 2, "estimators": 3, "run": 4, "cli": 5}
-BLENDER_MAY = {"base", "lightmap", "transport"}
+RANK = {"base": 0, "lightmap": 1, "transport": 2, "estimators": 3, "probes": 4, "run": 5, "cli": 6}
+BLENDER_MAY = {"base", "lightmap", "transport", "probes"}
 LONGEST = 80  # lines a function may have, compiled kernels aside
 
 
