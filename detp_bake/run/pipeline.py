@@ -7,6 +7,7 @@ stage takes what it reads and returns what it made, so a stage's signature is it
     build_estimators(lay)                -> Estimation  the discs' clearance, each estimator
     trace(lay, light, est)               -> Traced      photon batches until a stop, sums handed over
     results(lay, light, est, traced)     -> {estimator: BakeResult}
+    probes(lay, result)                  -> [ProbeGrid], report   light probes from the finished lightmaps
 
 The settings were checked at the door (door.py) before the scene was exported; here they are taken
 as they come, with the photon count chosen once.
@@ -30,6 +31,7 @@ from ..lightmap import denoise as denoise_mod, fragments as fragments_mod, sites
     texels as texels_mod, validity
 from ..lightmap.noise import MIN_GROUPS, BatchNoise
 from ..options import PHOTONS_PER_TEXEL
+from ..probes import baking as probes_mod, placement
 from ..rays import RayCaster
 from ..transport import direct as direct_mod, frame_direct
 from ..transport.photons import PhotonTracer
@@ -105,6 +107,8 @@ class Pipeline:
         admitted = door.with_photons(door.admitted(settings, names, frame_state=frame_state), scene)
         self.names = list(admitted.names)
         scene.check()
+        # Probes are placed in world space, before the scene is centred: a bad grid is refused here.
+        self.grids = placement.grids_for(scene, admitted.settings.probes, admitted.settings.probe_spacing)
         directional_mod.check_shadowmask(admitted.settings, scene, frame_state)
         self.settings = settings = wide(admitted.settings)
         self.scene, self.offset = scene.recentred()  # float32 rays and discs work near the origin (scene.py)
@@ -130,14 +134,19 @@ class Pipeline:
                                                  f"texels ({PHOTONS_PER_TEXEL} a texel; set them with --photons); "
                                                  f"tracing them should take about {expect:.2g} s on {self.threads} "
                                                  "threads"))
-        self.need = memory.check(scene, settings, self.names, self.batch_size, per_photon, self.per_photon_kept)
+        self.need = memory.check(scene, settings, self.names, self.batch_size, per_photon, self.per_photon_kept,
+                                 placement.cost(self.grids, len(settings.shadowmask))[1])
 
     def run(self, reach_of=None) -> dict:
         lay = self.lay_out(reach_of)
         light = self.direct_light(lay)
         est = self.build_estimators(lay)
         traced = self.trace(lay, light, est)
-        return self.results(lay, light, est, traced)
+        results = self.results(lay, light, est, traced)
+        if self.grids:
+            primary = results[self.names[0]]
+            primary.probes, primary.probe_info = self.probes(lay, primary)
+        return results
 
     def check_cancel(self, fraction=None) -> None:
         if self.cancelled():
@@ -280,6 +289,20 @@ class Pipeline:
         if self.offset.any():
             lay.texels.position += self.offset  # back where the texels are, in world space
         return results
+
+    def probes(self, lay: Layout, result: BakeResult) -> tuple[list, dict]:
+        """The light probes (probes/), gathered from the primary estimator's finished lightmaps; the
+        shadowmask lights' direct light apart, as in the lightmaps."""
+        settings = self.settings
+
+        def probe_progress(fraction):
+            self.check_cancel()
+            self.report(Progress("probes", fraction, f"Light probes {100 * fraction:.0f} %"))
+        info = probes_mod.bake_probes(self.grids, self.scene, lay.caster, result.images, settings.probe_rays,
+                                      settings.direct_samples, settings.seed, settings.shadowmask, self.offset,
+                                      probe_progress, leave_out=settings.shadowmask_mode == "subtract")
+        result.seconds["probes"] = info["seconds"]
+        return self.grids, info
 
     # Tracing's helpers ----------------------------------------------------------------------------
     def _partials(self, lay: Layout, est: Estimation, trace_progress):
