@@ -21,7 +21,7 @@ import numpy as np
 from ..rays import RayCaster
 from ..sampling import inline, jit, photon_rng, seed_key, uniform2, uniform_sphere
 from ..transport.direct_lights import AREA, POINT, SUN, direct_lights, light_ray, radical_inverse2
-from ..transport.textures import EXTEND, LINEAR, Textures, hit_uv, lookup, surfaces
+from ..transport.textures import CLOSEST, EXTEND, Textures, hit_uv, lookup, surfaces
 
 CHUNK_RAYS = 1 << 18  # gather rays per Embree call
 FOUR_PI = 4.0 * math.pi
@@ -207,7 +207,7 @@ def lighting(scene, caster: RayCaster, images: dict, samples: int, seed: int, ma
         if key in images:
             lm_of[obj.triangles] = names.index(key)
     packed = Textures.pack([images[n] for n in names] or [np.zeros((1, 1, 3), np.float32)],
-                           [EXTEND] * max(len(names), 1), [LINEAR] * max(len(names), 1))
+                           [EXTEND] * max(len(names), 1), [CLOSEST] * max(len(names), 1))
     lights = [lt for lt in direct_lights(scene, samples, spread=False) if lt.kind in (POINT, SUN, AREA)]
     for lt in lights:
         lt.samples = samples
