@@ -153,6 +153,7 @@ class DETPBAKE_PT_lightmaps(_Panel, bpy.types.Panel):
         row = layout.row()
         row.active = any(light.detp_bake.shadowmask for light in lights)
         row.prop(s, "shadowmask_mode")
+        _draw_probes(layout, context, s)
         layout.prop(s, "output_directory")
         layout.prop(s, "formats")
         layout.prop(s, "apply_after_bake")
@@ -160,6 +161,21 @@ class DETPBAKE_PT_lightmaps(_Panel, bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("detp_bake.unwrap", text="Unwrap: Lightmap Pack").method = "LIGHTMAP_PACK"
         row.operator("detp_bake.unwrap", text="xatlas").method = "XATLAS"
+
+
+def _draw_probes(layout, context, s) -> None:
+    """Light probes: the mode, its settings, and the count and memory before baking."""
+    layout.prop(s, "probes")
+    row = layout.row()
+    row.active = s.probes == "auto"
+    row.prop(s, "probe_spacing")
+    row = layout.row()
+    row.active = s.probes != "off"
+    row.prop(s, "probe_rays")
+    if s.probes != "off":
+        from ..detp_bake.blender.probe_volumes import panel_cost
+        count, size, exact = panel_cost(context.scene, context.view_layer, s.probes, s.probe_spacing)
+        layout.label(text=f"{'' if exact else 'At most '}{count:,} probes, {size / 1e6:.1f} MB")
 
 
 class DETPBAKE_PT_object(_Panel, bpy.types.Panel):

@@ -65,6 +65,9 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
     directional: _option("directional")
     # The shadowmask's lights: a toggle on each light object (DETPBakeObjectSettings.shadowmask)
     shadowmask_mode: _option("shadowmask_mode")
+    probes: _option("probes")
+    probe_spacing: _option("probe_spacing")
+    probe_rays: _option("probe_rays")
     output_directory: StringProperty(name="Output", default="//lightmaps/", subtype="DIR_PATH",
                                      description="Folder for the lightmap files (// is the .blend's folder)")
     formats: EnumProperty(name="Formats", options={"ENUM_FLAG"}, default={f.upper() for f in bake.BakeSettings.formats},

@@ -8,6 +8,7 @@ import bpy
 import numpy as np
 
 from ..errors import BakeError
+from .probe_volumes import probe_volumes
 from ..scene import Scene
 from .common import DEFAULT_UV, uses_nodes
 from .evaluation import Collector, flatten, holdout, instancers, render_evaluation, rendered_names
@@ -178,4 +179,5 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
     stats["geometry"] = fingerprints(o for o in targets if o.name in baked)  # for the glTF export (identity.py)
     stats["file"] = bpy.data.filepath
     scene.export_stats = stats
+    scene.probe_volumes = probe_volumes(bl_scene, view_layer)
     return scene

@@ -47,6 +47,11 @@ def auto_grid(scene, spacing: float) -> ProbeGrid:
     return ProbeGrid(AUTO_NAME, matrix, res, np.stack([x, y, z], axis=1))
 
 
+def cells(lo, hi, spacing: float) -> int:
+    """Cells of an automatic grid over the box lo … hi (before the near rule)."""
+    return int(np.prod([max(1, int(math.ceil((h - l + 2 * spacing) / spacing - 1e-9))) for l, h in zip(lo, hi)]))
+
+
 def _box(scene, spacing):
     baked = [o for o in scene.objects if o.bake and o.triangle_count]
     if not baked:
@@ -64,19 +69,21 @@ def _box(scene, spacing):
 
 def volume_grids(volumes) -> list[ProbeGrid]:
     """One full grid per Light Probe Volume (scene.ProbeVolume: name, matrix, resolution)."""
-    grids = []
-    for v in volumes:
-        res = tuple(int(r) for r in v.resolution)
-        if min(res) < 1:
-            raise BakeError(f"light probe volume '{v.name}': its resolution {res} must be at least 1 on each axis")
-        if res[0] * res[1] * res[2] > MAX_PROBES:
-            raise BakeError(f"light probe volume '{v.name}': {res[0] * res[1] * res[2]:,} probes is over "
-                            f"{MAX_PROBES:,}: lower its resolution")
-        m = np.asarray(v.matrix, np.float64)
-        if not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) <= 1e-12:
-            raise BakeError(f"light probe volume '{v.name}': its transform has a zero scale")
-        grids.append(ProbeGrid.full(v.name, m, res))
-    return grids
+    return [grid_of(v) for v in volumes]
+
+
+def grid_of(v) -> ProbeGrid:
+    """The full grid of one Light Probe Volume, or a BakeError naming it."""
+    res = tuple(int(r) for r in v.resolution)
+    if min(res) < 1:
+        raise BakeError(f"light probe volume '{v.name}': its resolution {res} must be at least 1 on each axis")
+    if res[0] * res[1] * res[2] > MAX_PROBES:
+        raise BakeError(f"light probe volume '{v.name}': {res[0] * res[1] * res[2]:,} probes is over "
+                        f"{MAX_PROBES:,}: lower its resolution")
+    m = np.asarray(v.matrix, np.float64)
+    if not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) <= 1e-12:
+        raise BakeError(f"light probe volume '{v.name}': its transform has a zero scale")
+    return ProbeGrid.full(v.name, m, res)
 
 
 def grids_for(scene, mode: str, spacing: float) -> list[ProbeGrid]:
@@ -97,7 +104,12 @@ def cost(grids, shadowmask_lights: int = 0) -> tuple[int, int]:
     """(probes, bytes) of `grids`: the count and memory the panel shows before a bake (the
     records, the gather's per-probe sums and its rays in flight)."""
     count = sum(len(g) for g in grids)
-    return count, count * (PROBE_BYTES + 8 * shadowmask_lights) + (GATHER_SCRATCH if count else 0)
+    return count, cost_of(count, shadowmask_lights)
+
+
+def cost_of(count: int, shadowmask_lights: int = 0) -> int:
+    """Bytes of `count` probes: see `cost`."""
+    return count * (PROBE_BYTES + 8 * shadowmask_lights) + (GATHER_SCRATCH if count else 0)
 
 
 @numba.njit(cache=True)
