@@ -145,3 +145,19 @@ def test_probes_are_written_with_the_lightmaps_and_reported(tmp_path):
     report = json.loads((tmp_path / "report.json").read_text())
     assert report["probes"]["count"] == len(grids[0]) and report["probes"]["invalid"] == 0
     assert report["probes"]["file"].endswith("probes.npz") and report["memory"]["parts_mb"]["light probes"] > 0
+
+
+def test_a_frame_range_writes_probes_per_frame(tmp_path):
+    from detp_bake.run import frames
+
+    def scene_at(frame):  # the lamp rises frame by frame
+        lamp = PointLight("Lamp", np.array([0.0, 0.0, 1.0 + frame]), np.array([50.0, 50.0, 50.0]))
+        scene = make_scene([("Floor", grid(4, 4, 1), 0.5, True)], [lamp], resolution=8)
+        scene.probe_volumes = [_volume("One", (0.0, 0.0, 0.5), (0.1, 0.1, 0.1), (1, 1, 1))]
+        return scene
+    got = frames.bake_frames(scene_at, frames.parse_frames("1-2"), _settings(probe_rays=64), tmp_path)
+    up = [sh9.irradiance(grid_mod.load(tmp_path / f"probes.{f:04d}.npz")[0].coefficients[0], AXES[4])[0]
+          for f in (1, 2)]
+    assert up[0] > up[1] > 0  # farther from the lamp on frame 2
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert [s["probes"]["file"].endswith(f"probes.{f:04d}.npz") for s, f in zip(report["per_frame"], (1, 2))] == [True] * 2

@@ -194,7 +194,8 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange,
                                             json.dumps(sorted(signatures[k].items())).encode(), np.uint8)])
             old = previous.get(frame)
             if old is not None and old.get("inputs") == inputs and all(
-                    os.path.isfile(f) for o in old["objects"] for f in o["files"]):
+                    os.path.isfile(f) for o in old["objects"] for f in o["files"]) and \
+                    os.path.isfile(old.get("probes", {}).get("file", __file__)):
                 report(bake_mod.Progress("write", 1.0, f"{label} · unchanged since the last bake: kept", part=(k, n)))
                 _add(result, frame, {**old, "kept": True}, {o["name"]: o["files"] for o in old["objects"]})
                 skipped.append(frame)
