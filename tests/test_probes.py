@@ -161,3 +161,20 @@ def test_a_frame_range_writes_probes_per_frame(tmp_path):
     assert up[0] > up[1] > 0  # farther from the lamp on frame 2
     report = json.loads((tmp_path / "report.json").read_text())
     assert [s["probes"]["file"].endswith(f"probes.{f:04d}.npz") for s, f in zip(report["per_frame"], (1, 2))] == [True] * 2
+
+
+def test_photon_segments_crossing_a_sphere_give_a_point_lights_delta():
+    # The paper's idea on a sphere (photon_sphere.py): a point light's photons crossing a probe's
+    # sphere give c_k = I/r²·Y_k(d) within their noise (10,000 crossings: about 1 %).
+    from detp_bake.probes import photon_sphere
+    from detp_bake.transport.photons import PhotonTracer
+    lamp = PointLight("Lamp", np.array([0.0, 0.0, 3.0]), np.array([100.0, 100.0, 100.0]))
+    scene = make_scene([("Plane", grid(4, 4, 1), 0.0, True)], [lamp], resolution=8)
+    g = grid_mod.ProbeGrid.full("One", _volume("One", (0.3, 0.0, 1.0), (0.5, 0.5, 0.5), (1, 1, 1)).matrix, (1, 1, 1))
+    spheres = photon_sphere.SphereGather([g])
+    for batch in PhotonTracer(scene, 1_000_000, 0, seed=1).batches():
+        spheres.add(batch)
+    d = lamp.position - g.positions[0]
+    expected = sh9.project((d / np.linalg.norm(d))[None], (lamp.power / (4 * np.pi) / (d @ d))[None])
+    assert 9000 < spheres.crossings[0] < 11000
+    np.testing.assert_allclose(spheres.coefficients()[0], expected, atol=0.03 * expected[0, 0])
