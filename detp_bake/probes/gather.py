@@ -84,7 +84,7 @@ def sky(world, env_on, env_pixels, env_rot, env_h, env_w, x, y, z):
 @jit
 def shade_rays(rays, d, prim, bu, bv, tfar, normals, albedo, emission, uvs, lm_of, lm_pixels, lm_info,
                alb_tex, tex_uvs, tex_pixels, tex_info, world, env_on, env_pixels, env_rot, env_h, env_w,
-               coeff, back, near_t, near_d):
+               coeff, back, near_t, near_d, nearest):
     """Each gather ray's radiance, projected: coeff[i] += L·4π/rays·Y(ω) (i: the probe in the chunk). A
     back-face hit counts in back[i], and the nearest one's distance and direction are kept (virtual offset)."""
     n = d.shape[0]
@@ -96,6 +96,8 @@ def shade_rays(rays, d, prim, bu, bv, tfar, normals, albedo, emission, uvs, lm_o
         if t < 0:
             r, g, bl = sky(world, env_on, env_pixels, env_rot, env_h, env_w, x, y, z)
         else:
+            if tfar[k] < nearest[i]:
+                nearest[i] = tfar[k]
             u, v = np.float64(bu[k]), np.float64(bv[k])
             w = 1.0 - u - v
             nx = w * normals[t, 0, 0] + u * normals[t, 1, 0] + v * normals[t, 2, 0]
@@ -226,7 +228,7 @@ def gather(lit: Lighting, positions: np.ndarray, rays: int, progress=None) -> di
     n = len(positions)
     pos = np.ascontiguousarray(positions, np.float64)
     out = {"coefficients": np.zeros((n, 9, 3)), "back": np.zeros(n, np.int64),
-           "near_t": np.full(n, np.inf), "near_d": np.zeros((n, 3)),
+           "near_t": np.full(n, np.inf), "near_d": np.zeros((n, 3)), "nearest": np.full(n, np.inf),
            "seen": np.zeros((n, len(lit.masked))), "arrived": np.zeros((n, len(lit.masked)))}
     step = max(1, CHUNK_RAYS // max(rays, 1))
     for a in range(0, n, step):
@@ -251,7 +253,7 @@ def _gather_chunk(lit: Lighting, pos, a, b, rays, out) -> None:
     shade_rays(rays, d, hit["primID"], hit["u"], hit["v"], hit["tfar"], scene.normals, scene.albedo,
                scene.emission, scene.uvs, lit.lm_of, lit.lightmaps.pixels, lit.lightmaps.info, sf.albedo_tex,
                sf.tex_uvs, sf.pixels, sf.info, *lit.sky, out["coefficients"][a:b], out["back"][a:b],
-               out["near_t"][a:b], out["near_d"][a:b])
+               out["near_t"][a:b], out["near_d"][a:b], out["nearest"][a:b])
 
 
 def _lights_chunk(lit: Lighting, pos, a, b, out) -> None:

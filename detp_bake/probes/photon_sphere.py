@@ -27,10 +27,14 @@ class SphereGather:
     """Sums over photon batches for the probes of `grids` (their world positions less `offset`, the
     bake's centring); `add(batch)` per batch, `coefficients()` at the end (N, 9, 3)."""
 
-    def __init__(self, grids, offset=None, radius: float = RADIUS):
+    def __init__(self, grids, offset=None, radius: float = RADIUS, clear=None):
+        """`clear` (N,): each probe's distance to the nearest surface (gather's `nearest`), when
+        known: a sphere is shrunk to 0.9 of it, as a sphere a surface cuts counts the photons
+        landing inside it and misses those leaving."""
         shift = np.zeros(3) if offset is None else np.asarray(offset, np.float64)
         self.counts = [len(g) for g in grids]
-        self.to_index, self.res, self.dense, self.centre, self.r2, self.area = [], [], [], [], [], []
+        self.to_index, self.res, self.dense = [], [], []
+        radii = []
         first = 0
         for g in grids:
             m = g.matrix.copy()
@@ -42,13 +46,15 @@ class SphereGather:
             rx, ry, rz = g.resolution
             dense = np.full(rx * ry * rz, -1, np.int64)
             dense[g.linear_index] = first + np.arange(len(g))
-            r = min(radius, 0.5) * cell_width(g)
+            radii.append(np.full(len(g), min(radius, 0.5) * cell_width(g)))
             self.to_index.append(to_index)
             self.res.append(np.array(g.resolution, np.int64))
             self.dense.append(dense)
-            self.r2.append(r * r)
-            self.area.append(math.pi * r * r)
             first += len(g)
+        r = np.concatenate(radii) if radii else np.zeros(0)
+        if clear is not None:
+            r = np.minimum(r, 0.9 * np.asarray(clear, np.float64))
+        self.r2, self.inv_area = r * r, 1.0 / np.maximum(math.pi * r * r, 1e-300)
         self.positions = np.concatenate([g.positions for g in grids]) - shift if grids else np.zeros((0, 3))
         self.sums = np.zeros((first, 9, 3))
         self.crossings = np.zeros(first, np.int64)
@@ -57,8 +63,7 @@ class SphereGather:
         """One photon batch's segments (transport/photons.PhotonBatch)."""
         for i in range(len(self.res)):
             _cross(batch.seg_origin, batch.seg_dir, batch.seg_length, batch.seg_flux, self.to_index[i],
-                   self.res[i], self.dense[i], self.positions, self.r2[i], 1.0 / self.area[i], self.sums,
-                   self.crossings)
+                   self.res[i], self.dense[i], self.positions, self.r2, self.inv_area, self.sums, self.crossings)
 
     def coefficients(self, share: float = 1.0) -> np.ndarray:
         """The coefficients (N, 9, 3): the sums over the share of the bake traced."""
@@ -107,10 +112,10 @@ def _cross(origin, direction, length, flux, to_index, res, dense, centre, r2, in
                 cx, cy, cz = centre[j, 0] - ox, centre[j, 1] - oy, centre[j, 2] - oz
                 tc = cx * dx + cy * dy + cz * dz
                 d2 = cx * cx + cy * cy + cz * cz - tc * tc
-                if d2 < r2:
-                    enter = tc - math.sqrt(r2 - d2)
+                if d2 < r2[j]:
+                    enter = tc - math.sqrt(r2[j] - d2)
                     if 0.0 <= enter < seg:
-                        w = inv_area
+                        w = inv_area[j]
                         add_sh(sums, j, -dx, -dy, -dz, flux[s, 0] * w, flux[s, 1] * w, flux[s, 2] * w)
                         crossings[j] += 1
             a = 0
