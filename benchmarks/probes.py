@@ -142,20 +142,23 @@ def main(argv=None):
     ap.add_argument("--reference", type=int, default=32768)
     ap.add_argument("--cost-resolution", type=int, default=1024)
     ap.add_argument("--skip-cost", action="store_true")
+    ap.add_argument("--only-cost", action="store_true")
     ap.add_argument("--json", default=str(Path(__file__).resolve().parent / "results" / "probes.json"))
     args = ap.parse_args(argv)
-    rows = compare(args)
+    rows = [] if args.only_cost else compare(args)
     print(f"{'estimator':<16} {'setting':<28} {'seconds':>8} {'trace s':>8} {'error':>8} {'err²·s':>10}")
     for r in rows:
         print(f"{r['estimator']:<16} {r['setting']:<28} {r['seconds']:8.3f} {r.get('trace_seconds', 0):8.2f} "
               f"{r['error']:8.4f} {r['error'] ** 2 * r['seconds']:10.3g}")
-    doc = {"scene": args.scene, "probes": 64, "rows": rows}
-    print(f"({valid_count[0]} of 64 probes outside the boxes are measured)")
+    doc = {"scene": args.scene, "probes": 64, "measured": valid_count[0], "rows": rows}
+    if rows:
+        print(f"({valid_count[0]} of 64 probes outside the boxes are measured)")
     if not args.skip_cost:
         doc["cost"] = c = cost(args)
         print(f"cost: {c['object']} at {c['resolution']}²: {c['without_seconds']:.1f} s without probes, "
               f"{c['with_seconds']:.1f} s with {c['probes']} ({c['invalid']} invalid; the probes {c['probe_seconds']:.2f} s): "
-              f"{100 * c['added']:+.1f} %")
+              f"{100 * c['added']:+.1f} % wall, the probe stage {100 * c['probe_seconds'] / c['without_seconds']:.1f} % "
+              "of the bake without")
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(doc, indent=2))
 

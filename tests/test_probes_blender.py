@@ -33,6 +33,14 @@ def test_light_probe_volumes_are_read_as_grids(cornell, bpy):
     # Cell centres of the unit cube under the object's transform: x at ±0.6 and 0, z from 0.325 up.
     assert np.allclose(sorted(set(np.round(g.positions[:, 0], 6))), [-0.6, 0.0, 0.6])
     assert np.allclose(sorted(set(np.round(g.positions[:, 2], 6))), [0.325, 0.775, 1.225, 1.675])
+    # What the panel shows before a bake: the volumes' count exactly, an automatic grid's at most.
+    from detp_bake.blender.probe_volumes import panel_cost
+    from detp_bake.probes import placement
+    count, size, exact = panel_cost(bpy.context.scene, bpy.context.view_layer, "volumes", 1.0)
+    assert (count, exact) == (24, True) and size == placement.cost([g])[1]
+    count, size, exact = panel_cost(bpy.context.scene, bpy.context.view_layer, "auto", 0.5)
+    kept = len(placement.grids_for(export(bpy), "auto", 0.5)[0])
+    assert not exact and count >= kept > 0 and size > 0
 
 
 def test_a_probe_reconstructs_cycles_tiny_sphere(cornell, bpy):
