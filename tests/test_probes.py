@@ -178,3 +178,21 @@ def test_photon_segments_crossing_a_sphere_give_a_point_lights_delta():
     expected = sh9.project((d / np.linalg.norm(d))[None], (lamp.power / (4 * np.pi) / (d @ d))[None])
     assert 9000 < spheres.crossings[0] < 11000
     np.testing.assert_allclose(spheres.coefficients()[0], expected, atol=0.03 * expected[0, 0])
+
+
+def test_a_shadowmask_lights_bounce_stays_in_the_probes():
+    # Subtract mode: the lightmaps lack the masked lamp's direct light, but a probe above the lit
+    # floor must still see the floor lit by it (masked_bounce.py): the probe then holds all the
+    # unmasked probe holds but the lamp's own delta.
+    lamp = PointLight("Lamp", np.array([0.0, 0.0, 2.0]), np.array([100.0, 100.0, 100.0]))
+    scene = make_scene([("Floor", grid(6, 6, 2), 0.5, True)], [lamp], resolution=32)
+    probe = np.array([0.5, 0.0, 1.0])
+    scene.probe_volumes = [_volume("One", probe, (0.1, 0.1, 0.1), (1, 1, 1))]
+    plain = bake.compute(scene, _settings(probe_rays=4096)).probes[0].coefficients[0]
+    masked = bake.compute(scene, _settings(probe_rays=4096, shadowmask=("Lamp",))).probes[0].coefficients[0]
+    d = lamp.position - probe
+    delta = sh9.project((d / np.linalg.norm(d))[None], (lamp.power / (4 * np.pi) / (d @ d))[None])
+    down = np.array([0.0, 0.0, -1.0])
+    assert sh9.irradiance(masked, down)[0] > 0.5 * sh9.irradiance(plain, down)[0]
+    np.testing.assert_allclose(sh9.irradiance(masked, AXES), sh9.irradiance(plain - delta, AXES), rtol=0.03,
+                               atol=0.005)

@@ -8,7 +8,8 @@ emission only (and it counts against the probe's validity, validity.py); on a mi
 world colour or its HDRI). The lights without surfaces (point, spot, sun, area) are sampled by
 shadow rays from the probe, `samples` each, as the lightmaps' direct light is (transport/
 direct_lights.py); a light in `masked` (a shadowmask light) adds nothing to the coefficients but
-its arrived share to `occlusion`. Rays are made and summed in compiled kernels, a chunk of probes
+its arrived share to `occlusion` (and its first bounce, which the lightmaps then lack, is
+added at the gather rays' hits: masked_bounce.py). Rays are made and summed in compiled kernels, a chunk of probes
 at a time; Embree traces each chunk's rays in one call.
 """
 from __future__ import annotations
@@ -22,28 +23,11 @@ from ..rays import RayCaster
 from ..sampling import inline, jit, photon_rng, seed_key, uniform2, uniform_sphere
 from ..transport.direct_lights import AREA, POINT, SUN, direct_lights, light_ray, radical_inverse2
 from ..transport.textures import CLOSEST, EXTEND, Textures, hit_uv, lookup, surfaces
+from . import masked_bounce
+from .sh9 import add_sh
 
 CHUNK_RAYS = 1 << 18  # gather rays per Embree call
 FOUR_PI = 4.0 * math.pi
-# The real SH basis constants (sh9.py), inlined into the kernels.
-_Y00 = 0.5 * math.sqrt(1.0 / math.pi)
-_Y1 = math.sqrt(3.0 / (4.0 * math.pi))
-_Y2A = 0.5 * math.sqrt(15.0 / math.pi)
-_Y20 = 0.25 * math.sqrt(5.0 / math.pi)
-_Y22 = 0.25 * math.sqrt(15.0 / math.pi)
-
-
-@inline
-def add_sh(out, i, x, y, z, w0, w1, w2):
-    """out[i, k, c] += w_c · Y_k(x, y, z): radiance weight w arriving from unit direction (x, y, z)."""
-    ys = (_Y00, _Y1 * y, _Y1 * z, _Y1 * x, _Y2A * x * y, _Y2A * y * z, _Y20 * (3.0 * z * z - 1.0),
-          _Y2A * x * z, _Y22 * (x * x - y * y))
-    for k in range(9):
-        out[i, k, 0] += w0 * ys[k]
-        out[i, k, 1] += w1 * ys[k]
-        out[i, k, 2] += w2 * ys[k]
-
-
 @jit
 def sphere_rays(pos, a, b, rays, key, o, d):
     """`rays` directions per probe a … b−1, stratified over the sphere (a Hammersley set rotated by
@@ -254,6 +238,8 @@ def _gather_chunk(lit: Lighting, pos, a, b, rays, out) -> None:
                scene.emission, scene.uvs, lit.lm_of, lit.lightmaps.pixels, lit.lightmaps.info, sf.albedo_tex,
                sf.tex_uvs, sf.pixels, sf.info, *lit.sky, out["coefficients"][a:b], out["back"][a:b],
                out["near_t"][a:b], out["near_d"][a:b], out["nearest"][a:b])
+    if lit.leave_out and lit.masked:  # the lightmaps lack the masked lights' direct light: its bounce here
+        masked_bounce.add(lit, o, d, hit, rays, out["coefficients"][a:b], salt=a)
 
 
 def _lights_chunk(lit: Lighting, pos, a, b, out) -> None:

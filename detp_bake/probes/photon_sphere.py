@@ -17,7 +17,7 @@ import math
 import numba
 import numpy as np
 
-from .gather import add_sh
+from .sh9 import add_sh
 from .validity import cell_width
 
 RADIUS = 0.4  # the sphere's radius, in cell widths (at most 0.5)
