@@ -118,16 +118,21 @@ def cost(args) -> dict:
         o.bake = o is first
     grid = _box_grid(scene, (16, 16, 16))
     out = {"object": first.name, "resolution": args.cost_resolution}
-    for label, volumes, mode in (("without", [], "off"), ("with", [ProbeVolume("bench", grid.matrix, (16, 16, 16))],
-                                                          "volumes")):
+    volume = [ProbeVolume("bench", grid.matrix, (16, 16, 16))]
+    runs = (("without", [], "off"), ("with", volume, "volumes"))
+    for label, volumes, mode in runs[::-1]:  # compiled and loaded first: a session's first bake pays that once
+        scene.probe_volumes = volumes
+        compute(scene, BakeSettings(probes=mode, photons=100_000, resolution=16, seed=1))
+    for label, volumes, mode in runs + runs:  # each twice, the faster counts (a shared machine)
         scene.probe_volumes = volumes
         t0 = time.perf_counter()
         r = compute(scene, BakeSettings(probes=mode, seed=1))
-        out[f"{label}_seconds"] = time.perf_counter() - t0
+        seconds = time.perf_counter() - t0
+        out[f"{label}_seconds"] = min(seconds, out.get(f"{label}_seconds", seconds))
         out[f"{label}_photons"] = r.stats.photons
         if r.probe_info:
-            out["probe_seconds"], out["probes"] = r.probe_info["seconds"], r.probe_info["count"]
-            out["invalid"] = r.probe_info["invalid"]
+            out["probe_seconds"] = min(r.probe_info["seconds"], out.get("probe_seconds", 1e9))
+            out["probes"], out["invalid"] = r.probe_info["count"], r.probe_info["invalid"]
     out["added"] = out["with_seconds"] / out["without_seconds"] - 1.0
     return out
 
