@@ -196,3 +196,25 @@ def test_a_shadowmask_lights_bounce_stays_in_the_probes():
     assert sh9.irradiance(masked, down)[0] > 0.5 * sh9.irradiance(plain, down)[0]
     np.testing.assert_allclose(sh9.irradiance(masked, AXES), sh9.irradiance(plain - delta, AXES), rtol=0.03,
                                atol=0.005)
+
+
+def test_the_job_has_a_probes_phase_that_a_cancel_ends(tmp_path):
+    from detp_bake.run import job as job_mod
+    lamp = PointLight("Lamp", np.array([0.0, 0.0, 1.0]), np.full(3, 50.0))
+    scene = make_scene([("Floor", grid(2.0, 2.0, 2), 0.5, True)], [lamp], resolution=8)
+    settings = _settings(probes="auto", probe_spacing=0.5, probe_rays=16)
+    events = list(job_mod.Job(scene, settings, tmp_path / "done").events())
+    phases = [e.phase for e in events if isinstance(e, job_mod.Phase)]
+    assert phases[-2:] == ["probes", "write"] and isinstance(events[-1], job_mod.Result)
+    assert (tmp_path / "done" / "probes.npz").is_file()
+    job = job_mod.Job(scene, settings, tmp_path / "cancelled")
+    hook = job._progress
+
+    def cancel_in_probes(p):
+        hook(p)
+        if p.phase == "probes":
+            job.cancel()
+    job._progress = cancel_in_probes
+    events = list(job.events())
+    assert isinstance(events[-1], job_mod.Cancelled) and events[-1].phase == "probes"
+    assert not (tmp_path / "cancelled").exists() or list((tmp_path / "cancelled").iterdir()) == []
