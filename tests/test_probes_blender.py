@@ -82,6 +82,7 @@ def test_a_probe_reconstructs_cycles_tiny_sphere(bpy, blend, probe):
     assert np.sqrt(np.mean((y @ fitted - cycles[baked]) ** 2)) < 0.1 * cycles[baked].mean()  # it holds
     axes = np.vstack([np.eye(3), -np.eye(3)])
     ours, theirs = sh9.irradiance(g.coefficients[0], axes), sh9.irradiance(fitted, axes)
+    print(f"{blend}: probe against Cycles' sphere (band 2) at six axes: {np.abs(ours / theirs - 1).max():.2%} at most")
     np.testing.assert_allclose(ours, theirs, rtol=0.03)
 
 
