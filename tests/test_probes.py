@@ -218,3 +218,19 @@ def test_the_job_has_a_probes_phase_that_a_cancel_ends(tmp_path):
     events = list(job.events())
     assert isinstance(events[-1], job_mod.Cancelled) and events[-1].phase == "probes"
     assert not (tmp_path / "cancelled").exists() or list((tmp_path / "cancelled").iterdir()) == []
+
+
+def test_an_hdri_sky_is_read_by_direction():
+    # An HDRI bright above the horizon (2) and dark below it, turned on its side by its rotation
+    # (its zenith along +x): the probe reads E/π = 2 facing +x and 0 facing −x (band 2 is exact
+    # there for a sky of two halves), 1 facing up.
+    from detp_bake.transport.environment import EnvironmentMap
+    image = np.zeros((32, 64, 3), np.float32)
+    image[16:] = 2.0  # rows from the nadir: the upper half of the image is the upper sky
+    turn = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])  # image z = world x
+    scene = make_scene([("Speck", grid(0.01, 0.01, 1, z=-50.0), 0.0, True)], [], resolution=4)
+    scene.world_map = EnvironmentMap(image, turn)
+    scene.probe_volumes = [_volume("One", (0.0, 0.0, 0.0), (0.1, 0.1, 0.1), (1, 1, 1))]
+    (g,) = bake.compute(scene, _settings(probe_rays=4096)).probes
+    reads = sh9.irradiance(g.coefficients[0], AXES)[:, 0]
+    np.testing.assert_allclose(reads[[0, 1, 4]], [2.0, 0.0, 1.0], atol=0.03)
