@@ -9,8 +9,9 @@ stage takes what it reads and returns what it made, so a stage's signature is it
     trace(lay, light, est)               -> Traced      photon batches until a stop, sums handed over
     results(lay, plan, light, est, traced) -> {estimator: BakeResult}
 
-Everything that reads the texels' positions and normals runs before `trace`; from there to the
-end of `results` they may be set aside (48 bytes a texel: texels.geometry_set_aside), once.
+Everything that reads the texels' positions and normals runs before `trace` (or, for the disc
+estimators, before their `finish`); from there to the end of `results` they are set aside (48
+bytes a texel: texels.geometry_set_aside), once.
 
 The settings were checked at the door (door.py) before the scene was exported; here they are taken
 as they come, with the photon count chosen once.
@@ -268,7 +269,8 @@ class Pipeline:
                 message += f" · noise {100 * max(traced.current.values(), default=0.0):.2g} %"
             self.report(Progress("trace", photons / total, message))
 
-        traced.aside.enter_context(self._aside_while_tracing(lay))
+        if self._geometry_may_go(lay, while_tracing=True):
+            traced.aside.enter_context(texels_mod.geometry_set_aside(lay.texels, self.scene))
         with contextlib.closing(iter(self._partials(lay, est, trace_progress))) as partials:
             for part in partials:
                 totals.add(part)
@@ -321,13 +323,15 @@ class Pipeline:
         return self.cluster.partials(job, runs_of_batches, self.cancelled, trace_progress,
                                      worker_bytes(self.need, lay.at, est.runs, runs_of_batches))
 
-    def _aside_while_tracing(self, lay: Layout):
-        """The texels' positions and normals set aside while tracing when no estimator reads them
-        then and the tracing is this process's own (48 bytes a texel: texels.geometry_set_aside)."""
-        if self.cluster is None and self.frame_state is None and not any(
-                estimators.get(name).texel_geometry_while_tracing for name in self.names):
-            return texels_mod.geometry_set_aside(lay.texels, self.scene)
-        return contextlib.nullcontext()
+    def _geometry_may_go(self, lay: Layout, while_tracing: bool) -> bool:
+        """Whether the texels' positions and normals may be set aside (48 bytes a texel:
+        texels.geometry_set_aside) now, once: while tracing, only when the tracing is this process's
+        own, not a frame of a range, and no estimator reads them then (the disc estimators do, until
+        their `finish`)."""
+        if lay.texels.position is None:
+            return False
+        return not while_tracing or (self.cluster is None and self.frame_state is None and not any(
+            estimators.get(name).texel_geometry_while_tracing for name in self.names))
 
     def _show(self, lay: Layout, light: Direct, est: Estimation, traced: Traced, totals, share) -> None:
         """The live preview of the primary estimator's lightmaps so far, when one is asked."""
@@ -360,6 +364,8 @@ class Pipeline:
         run = est.runs[name]
         t1 = time.perf_counter()
         out = run.finish()
+        if name == self.names[-1] and self._geometry_may_go(lay, while_tracing=False):
+            traced.aside.enter_context(texels_mod.geometry_set_aside(lay.texels, self.scene))  # the last read done
         # The estimator's per-texel state goes before the images are made: the class still
         # answers what the rest of the loop asks (streaming, discs, stores_hits, fixed_noise).
         est.runs[name] = kind = type(run)
