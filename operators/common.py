@@ -1,8 +1,11 @@
 """What every operator needs: the bake settings from the scene's properties, the objects to bake,
 and a Blender scene exported for the core."""
+import os
+
 import bpy
 
 from ..detp_bake import blender, options
+from ..detp_bake.errors import BakeError
 from ..detp_bake.run import memory
 from ..detp_bake.lightmap import texels
 from ..detp_bake.run.bake import BakeSettings
@@ -113,3 +116,18 @@ def idle(cls, context) -> bool:
         cls.poll_message_set(busy)
         return False
     return context.scene is not None
+
+
+def apply_probes(scene, folder: str, log) -> int:
+    """Light the scene's objects marked Probe Light with the probes.npz in `folder`, if there is
+    one; how many objects."""
+    objects = [o for o in scene.objects if o.type == "MESH" and o.detp_bake.probe_light]
+    path = os.path.join(folder, "probes.npz")
+    if not objects or not os.path.isfile(path):
+        return 0
+    try:
+        blender.apply_probes(scene, path, objects)
+    except BakeError as exc:
+        log(str(exc))
+        return 0
+    return len(objects)

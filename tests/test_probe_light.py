@@ -135,3 +135,46 @@ def test_revert_restores_the_material_exactly(bpy, tmp_path, shared):
     assert scene_snapshot(bpy) == before
     assert sh_nodes.PROBE_GROUP not in bpy.data.node_groups
     assert not probe_light.probe_lit(scene)
+
+
+def test_viewport_spheres_are_coloured_by_the_probes_radiance(bpy):
+    from detp_bake.blender import probe_view
+    g = _grid()
+    g.valid[1] = False
+    normals, tris = probe_view.unit_sphere()
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, rtol=1e-12)
+    pos, colour, triangles = probe_view.spheres([g], radius=0.1)
+    n = len(normals)
+    assert pos.shape == (2 * n, 3) and triangles.shape == (2 * len(tris), 3) and triangles.max() == 2 * n - 1
+    np.testing.assert_allclose(pos[:n], g.positions[0] + 0.1 * normals, atol=1e-6)
+    np.testing.assert_allclose(colour[:n, :3], np.clip(sh9.radiance(g.coefficients[0], normals), 0, None),
+                               rtol=1e-5, atol=1e-6)
+    np.testing.assert_array_equal(colour[n:, :3], np.tile(probe_view.INVALID, (n, 1)))  # the invalid probe
+    assert colour[:n, 0].max() > 2 * colour[:n, 0].min()  # the sun's side is brighter
+    assert probe_view.spacing([g]) == pytest.approx(2.0)
+
+
+def test_the_panel_applies_probe_light_and_the_toggle_adds_the_draw_handler(bpy, tmp_path):
+    from test_addon import _import_addon
+    from detp_bake import blender
+    from detp_bake.blender import probe_light, probe_view
+    module = _import_addon()
+    module.register()
+    try:
+        assert probe_light.on_frame_change in bpy.app.handlers.frame_change_post
+        scene, ball, mat = _sphere_scene(bpy, tmp_path)
+        scene.detp_bake.output_directory = str(tmp_path)
+        ball.detp_bake.probe_light = True
+        assert bpy.ops.detp_bake.apply() == {"FINISHED"}
+        assert probe_light.probe_lit(scene) == [ball]
+        scene.detp_bake.show_probes = True
+        assert probe_view.shown() and probe_view.probe_file(scene) == str(tmp_path / grid.FILE_NAME)
+        scene.detp_bake.show_probes = False
+        assert not probe_view.shown()
+        scene.detp_bake.show_probes = True
+        assert bpy.ops.detp_bake.revert() == {"FINISHED"} and not probe_light.probe_lit(scene)
+        assert blender.REVERT_KEY not in ball
+    finally:
+        module.unregister()
+    assert not probe_view.shown()
+    assert probe_light.on_frame_change not in bpy.app.handlers.frame_change_post
