@@ -34,7 +34,8 @@ def build(bpy, folder):
     scene = bpy.context.scene
     folder.mkdir(parents=True, exist_ok=True)
     ground = bpy.data.materials.new("Ground")
-    ground.use_nodes = True
+    if bpy.app.version < (5, 0, 0):
+        ground.use_nodes = True
     bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0, 0, 0))
     floor = bpy.context.active_object
     floor.name = "Floor"
@@ -52,7 +53,8 @@ def build(bpy, folder):
         "settings": {"estimator": "texel_histogram"}, "objects": [{"name": "Floor", "files": [str(exr)]}]}))
     grid.save([probes()], folder / grid.FILE_NAME)
     paint = bpy.data.materials.new("Paint")
-    paint.use_nodes = True
+    if bpy.app.version < (5, 0, 0):
+        paint.use_nodes = True
     paint.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (*BASE, 1.0)
     bpy.ops.mesh.primitive_uv_sphere_add(segments=64, ring_count=32, radius=1.0, location=BALL)
     ball = bpy.context.active_object

@@ -27,7 +27,8 @@ def _sphere_scene(bpy, tmp_path, shared=False):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     mat = bpy.data.materials.new("Paint")
-    mat.use_nodes = True
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
     mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (*BASE, 1.0)
     bpy.ops.mesh.primitive_uv_sphere_add(segments=64, ring_count=32, radius=1.0, location=(-1.0, 0.0, 0.0))
     ball = bpy.context.active_object
