@@ -1,7 +1,5 @@
 """What every operator needs: the bake settings from the scene's properties, the objects to bake,
 and a Blender scene exported for the core."""
-import os
-
 import bpy
 
 from ..detp_bake import blender, options
@@ -121,13 +119,8 @@ def idle(cls, context) -> bool:
 def apply_probes(scene, folder: str, log) -> int:
     """Light the scene's objects marked Probe Light with the probes.npz in `folder`, if there is
     one; how many objects."""
-    objects = [o for o in scene.objects if o.type == "MESH" and o.detp_bake.probe_light]
-    path = os.path.join(folder, "probes.npz")
-    if not objects or not os.path.isfile(path):
-        return 0
     try:
-        blender.apply_probes(scene, path, objects)
+        return len(blender.apply_marked(scene, folder))
     except BakeError as exc:
         log(str(exc))
         return 0
-    return len(objects)

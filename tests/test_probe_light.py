@@ -179,3 +179,16 @@ def test_the_panel_applies_probe_light_and_the_toggle_adds_the_draw_handler(bpy,
         module.unregister()
     assert not probe_view.shown()
     assert probe_light.on_frame_change not in bpy.app.handlers.frame_change_post
+
+
+def test_the_command_line_lights_objects_marked_in_their_stored_settings(bpy, tmp_path):
+    """Without the add-on registered (the command line), the toggle is read from the settings the
+    .blend stored on the object."""
+    from detp_bake import blender
+    scene, ball, mat = _sphere_scene(bpy, tmp_path)
+    assert not hasattr(bpy.types.Object, "detp_bake")
+    assert blender.apply_marked(scene, tmp_path) == []
+    ball["detp_bake"] = {"probe_light": 1}
+    assert blender.apply_marked(scene, tmp_path) == [ball]
+    assert blender.apply_marked(scene, tmp_path / "elsewhere") == []  # no probes.npz there: nothing
+    assert blender.revert(ball)

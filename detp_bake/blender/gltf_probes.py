@@ -14,6 +14,7 @@ import numpy as np
 
 from ..probes import grid, lookup
 from .common import PROBE_PROPERTY
+from .probe_light import marked
 
 EXTENSION = "DETP_light_probes"
 FORMAT = "RGBA16F"
@@ -36,8 +37,7 @@ def read(out_dir) -> list:
 
 def probe_lit(obj) -> bool:
     """An object the export marks: it shows probe light, or its Probe Light toggle is on."""
-    settings = getattr(obj, "detp_bake", None)
-    return f"{PROBE_PROPERTY}0" in obj or bool(settings is not None and getattr(settings, "probe_light", False))
+    return f"{PROBE_PROPERTY}0" in obj or marked(obj)
 
 
 def scene_extension(grids: list):

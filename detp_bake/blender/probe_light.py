@@ -103,6 +103,29 @@ def apply_probes(bl_scene, path, objects: list, shared: bool = False) -> list:
     return list(objects)
 
 
+def marked(obj) -> bool:
+    """The object's Probe Light toggle (the add-on's object setting; read from the stored settings
+    where the add-on is not registered: the command line)."""
+    settings = getattr(obj, "detp_bake", None)
+    if settings is not None and hasattr(settings, "probe_light"):
+        return bool(settings.probe_light)
+    stored = obj.get("detp_bake")
+    return bool(stored is not None and hasattr(stored, "get") and stored.get("probe_light"))
+
+
+def apply_marked(bl_scene, folder, log=None) -> list:
+    """Light the scene's meshes marked Probe Light with the probes.npz in `folder`, when there is
+    one and something is marked; the objects lit."""
+    path = Path(folder) / grid.FILE_NAME
+    objects = [o for o in bl_scene.objects if o.type == "MESH" and marked(o)]
+    if not objects or not path.is_file():
+        return []
+    lit = apply_probes(bl_scene, path, objects)
+    if log is not None:
+        log(f"probe light on {len(lit)} object{'s' if len(lit) > 1 else ''}: {', '.join(o.name for o in lit)}")
+    return lit
+
+
 def probe_lit(bl_scene) -> list:
     """The scene's objects that show probe light now."""
     return [o for o in bl_scene.objects if REVERT_KEY in o and f"{PROBE_PROPERTY}0" in o]
