@@ -7,7 +7,6 @@ Tolerance, in 8-bit sRGB levels: the PNG's rounding (0.5), float16 coefficients 
 quarter of a level at most), the sphere's interpolated vertex normals against the true ones (64 × 32
 segments: under 0.5°, under half a level where the sun's gradient is steepest): 1.5 levels
 (measured: 0.73 in the sun, 0.50 in shade, 0.25 on average)."""
-import json
 import math
 
 import numpy as np
@@ -15,7 +14,7 @@ import pytest
 
 import probe_scene
 from detp_bake.probes import lookup, sh9
-from test_viewer import CHROMIUM, _browser_missing, _Server, _shot  # noqa: F401 (CHROMIUM: its skip reason)
+from test_viewer import _browser_missing, _Server, _shot
 
 SIZE = 160
 TO_GLTF = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
