@@ -6,6 +6,8 @@ channel (L0 a float, L1 a vector), node for node the numpy formula; "detp_bake S
 and per-axis L1 colours into channels, runs the channel group on each and joins them; "detp_bake
 dominant" does the same with each channel's L1 rebuilt from a dominant-direction map
 (`sh.from_dominant`: the direction times L0 times the directionality).
+"detp_bake SH L2" is a light probe's `sh9.irradiance` (nine radiance colours in, E/π out) for
+probe-lit objects (probe_light.py).
 Normals are world space, as L1 is (Geometry › Normal and a Normal Map node's output both are).
 Revert removes a group when nothing uses it any more (`remove_unused`)."""
 from __future__ import annotations
