@@ -27,12 +27,11 @@ LINES = {"4.5": "3.11", "5.2": "3.13"}
 LINE_VERSIONS = {"4.5": ("4.5.0", "5.0.0"), "5.2": ("5.2.0", None)}
 
 # What the extension imports at run time besides Blender's own numpy (bpy is Blender itself).
-RUNTIME = ("embreex", "OpenImageIO", "numba", "llvmlite", "scipy", "xatlas", "pyoidn")
+RUNTIME = ("embreex", "OpenImageIO", "numba", "llvmlite", "xatlas", "pyoidn")
 
 # Blender platform -> pip --platform tags, most preferred first.
 # - linux-x64: Blender 4.5+ needs glibc 2.28, so manylinux_2_28 and older.
-# - macos-arm64: embreex 4.4 wheels need macOS 13 (numba/llvmlite 12, the rest 11), and scipy's
-#   macOS 14 (Accelerate) build must not be picked.
+# - macos-arm64: embreex 4.4 wheels need macOS 13 (numba/llvmlite 12, the rest 11).
 # - macos-x64 is left out: numba >= 0.63 and llvmlite >= 0.46 have no Intel-mac wheels (the last are
 #   numba 0.62.1 / llvmlite 0.45.1), and Blender 5.x has no Intel-mac build at all.
 PLATFORM_TAGS = {

@@ -16,7 +16,7 @@ import sys
 import time
 import traceback
 
-RUNTIME = ("embreex", "OpenImageIO", "numba", "llvmlite", "scipy", "xatlas", "pyoidn")  # as extension_build.RUNTIME
+RUNTIME = ("embreex", "OpenImageIO", "numba", "llvmlite", "xatlas", "pyoidn")  # as extension_build.RUNTIME
 REPO = "user_default"
 PKG = "detp_bake"
 MODULE = f"bl_ext.{REPO}.{PKG}"
