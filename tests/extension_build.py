@@ -142,6 +142,38 @@ def download_cached(cache: Path, python: str, platform: str) -> list[Path]:
     return [cache / Path(w).name for w in expected]
 
 
+# pyoidn's Linux wheel carries OIDN's GPU devices (SYCL, HIP, CUDA and the SYCL runtime: libsycl,
+# libur_*, libumf), its command-line tools and CMake files beside the CPU device, and each library
+# three times over (a zip holds no symlinks). The add-on runs OIDN on the CPU only (lightmap/denoise.py),
+# so its zip gets the wheel with just what pyoidn loads: the library it opens, the core (with the
+# networks' weights), the CPU device, which OIDN's core finds beside itself, and TBB by its soname.
+# The Windows and macOS wheels are bundled as published: nothing here can load them to check a cut.
+CPU_ONLY = {"linux-x64": re.compile(r"pyoidn/oidn/lib/lib(OpenImageDenoise\.so|OpenImageDenoise_core\.so\.[\d.]+"
+                                    r"|OpenImageDenoise_device_cpu\.so\.[\d.]+|tbb\.so\.12)")}
+
+
+def cpu_only_wheel(wheel: Path, dest: Path, platform: str) -> Path:
+    """`wheel` as dest/<same name>, without pyoidn's files that the CPU device never loads (CPU_ONLY),
+    its RECORD listing exactly what is left. Any other wheel, or platform, is returned as it is."""
+    import zipfile
+    if not wheel.name.startswith("pyoidn-") or platform not in CPU_ONLY:
+        return wheel
+
+    def keep(name: str) -> bool:
+        return not name.startswith("pyoidn/oidn/") or bool(CPU_ONLY[platform].fullmatch(name))
+
+    dest.mkdir(parents=True, exist_ok=True)
+    out = dest / wheel.name
+    with zipfile.ZipFile(wheel) as src, zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as dst:
+        record = next(n for n in src.namelist() if n.endswith(".dist-info/RECORD"))
+        for info in src.infolist():
+            if keep(info.filename) and info.filename != record:
+                dst.writestr(info, src.read(info))  # the entry's date and mode bits kept
+        lines = [r for r in src.read(record).decode().splitlines() if r and keep(r.split(",")[0])]
+        dst.writestr(src.getinfo(record), "\n".join(lines) + "\n")
+    return out
+
+
 def blender_ext_script(bpy_version_dir: Path) -> Path:
     """Blender's extension tool, shipped inside the bpy wheel (`bpy/<major>.<minor>/`) as a standalone script."""
     return Path(bpy_version_dir) / "scripts" / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
@@ -196,10 +228,11 @@ def build_zip(dist: Path, blender_ext: Path, cache: Path, line: str, platform: s
     """The zip users get for one Blender line and platform, with that line's wheels only:
     dist/<id>-<version>-blender<line>-<platform>.zip (`make extension` and tests/test_extension.py)."""
     import tempfile
-    wheels = download_cached(cache, LINES[line], platform)
     dist.mkdir(parents=True, exist_ok=True)
     out = dist / zip_name(line, platform)
     with tempfile.TemporaryDirectory() as tmp:
+        wheels = [cpu_only_wheel(w, Path(tmp) / "cpu-only", platform)
+                  for w in download_cached(cache, LINES[line], platform)]
         src = stage_source(Path(tmp) / "src", wheels, platform, line)
         subprocess.run([sys.executable, str(blender_ext), "build", "--source-dir", str(src),
                         "--output-filepath", str(out)], check=True, stdout=subprocess.DEVNULL)
