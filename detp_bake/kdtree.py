@@ -173,27 +173,40 @@ def _split(data, idx, s, e, lo, hi, median):
 
 
 @numba.njit(cache=True)
+def _grown(a, rows):
+    """`a` with room for at least `rows` rows (doubled as often as needed), its rows kept."""
+    if rows <= a.shape[0]:
+        return a
+    size = a.shape[0]
+    while size < rows:
+        size *= 2
+    b = np.zeros((size, a.shape[1]), a.dtype)
+    b[:a.shape[0]] = a
+    return b
+
+
+@numba.njit(cache=True)
 def _build(data, lo0, hi0, median, compact):
-    """(idx, start, end, dim, split, less, greater): node i holds idx[start[i]:end[i]]; dim[i] = -1
-    for a leaf. Nodes are split as cKDTree splits them (module docstring)."""
+    """(idx, node, split): node i holds idx[node[i, 0]:node[i, 1]], splits dimension node[i, 2]
+    (-1: a leaf) at split[i, 0] into nodes node[i, 3] and node[i, 4]. Nodes are split as cKDTree
+    splits them (module docstring); split[i, 1:] are the bounds a node passes to its children."""
     n = data.shape[0]
     idx = np.arange(n)
-    cap = 2 * n + 1
-    start, end = np.zeros(cap, np.int64), np.zeros(cap, np.int64)
-    dim, split = np.full(cap, -1, np.int64), np.zeros(cap)
-    less, greater = np.zeros(cap, np.int64), np.zeros(cap, np.int64)
-    todo = np.zeros(cap, np.int64)  # node ids still to split
-    box = np.zeros((cap, 6))  # their bounds (lo xyz, hi xyz) when not compact
-    box[0, :3], box[0, 3:] = lo0, hi0
-    end[0], count, top = n, 1, 1
+    cap = 4 * (n // LEAF) + 16  # grown when sliding midpoints cut small leaves
+    node = np.zeros((cap, 5), np.int64)
+    split = np.zeros((cap, 7))
+    todo = np.zeros((cap, 1), np.int64)  # node ids still to split, depth first
+    node[0, 1], node[0, 2] = n, -1
+    split[0, 1:4], split[0, 4:] = lo0, hi0
+    count, top = 1, 1
     lo, hi = np.empty(3), np.empty(3)
     while top > 0:
         top -= 1
-        nd = todo[top]
-        s, e = start[nd], end[nd]
+        nd = todo[top, 0]
+        s, e = node[nd, 0], node[nd, 1]
         if e - s <= LEAF:
             continue
-        lo[:], hi[:] = box[nd, :3], box[nd, 3:]
+        lo[:], hi[:] = split[nd, 1:4], split[nd, 4:]
         if compact:
             lo[:], hi[:] = data[idx[s]], data[idx[s]]
             for j in range(s + 1, e):
@@ -210,16 +223,20 @@ def _build(data, lo0, hi0, median, compact):
             d, v, p = _split(data, idx, s, e, lo, hi, median)
         if d < 0:
             continue
+        node = _grown(node, count + 2)
+        split = _grown(split, count + 2)
+        todo = _grown(todo, top + 2)
         a, b = count, count + 1
         count += 2
-        dim[nd], split[nd], less[nd], greater[nd] = d, v, a, b
-        start[a], end[a], start[b], end[b] = s, p, p, e
-        box[a, :3], box[a, 3:], box[b, :3], box[b, 3:] = lo, hi, lo, hi
-        box[a, 3 + d] = v
-        box[b, d] = v
-        todo[top], todo[top + 1] = b, a
+        node[nd, 2], node[nd, 3], node[nd, 4], split[nd, 0] = d, a, b, v
+        node[a, 0], node[a, 1], node[b, 0], node[b, 1] = s, p, p, e
+        node[a, 2] = node[b, 2] = -1
+        split[a, 1:4], split[a, 4:], split[b, 1:4], split[b, 4:] = lo, hi, lo, hi
+        split[a, 4 + d] = v
+        split[b, 1 + d] = v
+        todo[top, 0], todo[top + 1, 0] = b, a
         top += 2
-    return idx, start[:count], end[:count], dim[:count], split[:count], less[:count], greater[:count]
+    return idx, node[:count].copy(), split[:count, 0].copy()
 
 
 # --- the query ------------------------------------------------------------------------------------
@@ -257,7 +274,7 @@ def _remove(pri, val, n):
 def _one(data, tree, lo0, hi0, x, k, bound, node_of, min_of, side_of, qp, qv, npri, nval, out_d, out_i):
     """The k nearest of `data` to `x` with d² < bound², as cKDTree's query walks the tree: nearer
     children first, farther ones on a heap by their least distance."""
-    idx, start, end, dim, split, less, greater = tree
+    idx, node, split = tree
     ub = bound * bound
     node_of[0], min_of[0], free = 0, 0.0, 1
     for i in range(3):
@@ -269,8 +286,8 @@ def _one(data, tree, lo0, hi0, x, k, bound, node_of, min_of, side_of, qp, qv, np
     cur, qn, nn = 0, 0, 0
     while True:
         nd = node_of[cur]
-        if dim[nd] < 0:
-            for t in range(start[nd], end[nd]):
+        if node[nd, 2] < 0:
+            for t in range(node[nd, 0], node[nd, 1]):
                 j = idx[t]
                 s = 0.0
                 for i in range(3):
@@ -289,14 +306,16 @@ def _one(data, tree, lo0, hi0, x, k, bound, node_of, min_of, side_of, qp, qv, np
             continue
         if min_of[cur] > ub:
             break
-        d, v = dim[nd], split[nd]
+        if free == node_of.shape[0]:
+            return False  # the pool is full: the caller grows it and asks again
+        d, v = node[nd, 2], split[nd]
         far = free
         free += 1
         min_of[far], side_of[far] = min_of[cur], side_of[cur]
         if x[d] < v:
-            node_of[cur], node_of[far], s = less[nd], greater[nd], v - x[d]
+            node_of[cur], node_of[far], s = node[nd, 3], node[nd, 4], v - x[d]
         else:
-            node_of[cur], node_of[far], s = greater[nd], less[nd], x[d] - v
+            node_of[cur], node_of[far], s = node[nd, 4], node[nd, 3], x[d] - v
         min_of[far] += s * s - side_of[far, d]
         side_of[far, d] = s * s
         if min_of[cur] > min_of[far]:
@@ -306,19 +325,23 @@ def _one(data, tree, lo0, hi0, x, k, bound, node_of, min_of, side_of, qp, qv, np
     for r in range(nn - 1, -1, -1):
         out_d[r], out_i[r] = np.sqrt(-npri[0]), nval[0]
         _remove(npri, nval, r + 1)
+    return True
 
 
 @numba.njit(cache=True, parallel=True)
 def _query(data, tree, lo0, hi0, xs, k, bound, out_d, out_i, blocks):
     m = xs.shape[0]
-    cap = 2 * tree[1].shape[0] + 2  # node visits: each internal node's far child once
     for b in numba.prange(blocks):
-        node_of, min_of, side_of = np.empty(cap, np.int64), np.empty(cap), np.empty((cap, 3))
-        qp, qv = np.empty(cap), np.empty(cap, np.int64)
+        cap = 256  # nodes met by one query; doubled when a query meets more
         npri, nval = np.empty(k), np.empty(k, np.int64)
-        for q in range(b * m // blocks, (b + 1) * m // blocks):
-            _one(data, tree, lo0, hi0, xs[q], k, bound, node_of, min_of, side_of, qp, qv, npri, nval,
-                 out_d[q], out_i[q])
+        q = b * m // blocks
+        while q < (b + 1) * m // blocks:
+            node_of, min_of, side_of = np.empty(cap, np.int64), np.empty(cap), np.empty((cap, 3))
+            qp, qv = np.empty(cap), np.empty(cap, np.int64)
+            while q < (b + 1) * m // blocks and _one(data, tree, lo0, hi0, xs[q], k, bound, node_of, min_of,
+                                                     side_of, qp, qv, npri, nval, out_d[q], out_i[q]):
+                q += 1
+            cap *= 2
 
 
 class KDTree:

@@ -57,7 +57,7 @@ def _cloud(kind, n, rng):
 @pytest.mark.parametrize("balanced", [True, False])
 def test_kdtree_gives_ckdtrees_neighbours_in_its_order(kind, balanced):
     rng = np.random.default_rng(7)
-    for n, k in [(1, 1), (2, 3), (17, 5), (600, 24), (2500, 40)]:
+    for n, k in [(1, 1), (2, 3), (17, 5), (600, 24), (2500, 40), (20000, 3000)]:  # the last meets > 256 nodes
         pts = _cloud(kind, n, rng)
         queries = np.concatenate([pts[rng.integers(0, len(pts), 30)], rng.random((30, 3)) * 3])
         ours = KDTree(pts, balanced=balanced, compact=balanced)
