@@ -33,6 +33,7 @@ class DETPBAKE_PT_main(_Panel, bpy.types.Panel):
         row.operator("detp_bake.apply", icon="MATERIAL")
         row.operator("detp_bake.revert", icon="LOOP_BACK")
         layout.operator("detp_bake.open_image", icon="IMAGE_DATA")
+        layout.prop(s, "show_probes", icon="LIGHTPROBE_VOLUME" if bpy.app.version >= (4, 1, 0) else "LIGHTPROBE_GRID")
         layout.operator("detp_bake.export_gltf", icon="EXPORT")
 
     @staticmethod
@@ -205,6 +206,7 @@ class DETPBAKE_PT_object(_Panel, bpy.types.Panel):
         layout.prop(o, "include")
         layout.prop(o, "density_scale" if context.scene.detp_bake.lightmaps == "atlas" else "resolution")
         layout.prop(o, "uv_layer")
+        layout.prop(o, "probe_light")
         if context.scene.detp_bake.use_frame_range:
             layout.prop(o, "motion")
 

@@ -8,6 +8,7 @@ from ..options import UV_LAYER
 
 FRAME_NAME = "detp_bake lightmap"
 REVERT_KEY = "detp_bake_revert"
+PROBE_PROPERTY = "detp_probe_sh"  # an object's probe SH, one colour per coefficient: detp_probe_sh0 … 8
 DEFAULT_UV = UV_LAYER
 DEFAULT_ALBEDO = (0.8, 0.8, 0.8)
 

@@ -20,10 +20,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .charts import chart_widths
 from ..bvh import discs_meet_triangles
+from ..kdtree import KDTree
 from .texels import TexelSet, geometric_normals, lightmap_triangles
 from .validity import blocked_between
 
@@ -71,7 +71,7 @@ def find(texels: TexelSet, lm, scene, caster, threads: int = 1) -> Fragments | N
     pos = texels.position[sl]
     size = lm.texel_size
     k = min(NEIGHBOURS, lm.count)
-    dist, near = cKDTree(pos).query(pos[local], k=k, distance_upper_bound=3 * SIGMA * size, workers=max(1, threads))
+    dist, near = KDTree(pos).query(pos[local], k, distance_upper_bound=3 * SIGMA * size)
     dist, near = dist.reshape(len(local), k), near.reshape(len(local), k)
     found = near < lm.count
     near = np.where(found, near, local[:, None])

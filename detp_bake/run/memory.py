@@ -47,9 +47,9 @@ PIXEL_BYTES = 12 + 4 + 2
 # (OIDN writes over it), the part denoised before it, the sharp lights' part added after.
 OIDN_BYTES_PER_PIXEL = 560
 OIDN_MOST = 115_000_000
-# Measured (benchmarks/memory.py, 2048², 5 % gutter, 2 cores, docs/real_levels.md): the texel
-# histogram at 1M photons peaks at 122 bytes a texel (348 before the tiles and the cuts that came
-# with them; its positions and normals are set aside while it traces and while OIDN runs); the
+# Measured (benchmarks/memory.py, 2048², 5 % gutter, 2 cores; benchmarks/measured/memory.json): the
+# texel histogram at 1M photons peaks at 106 bytes a texel (348 before the tiles and the cuts that
+# came with them; its positions and normals are set aside from tracing to the last image); the
 # estimate (each part at its own peak, summed) says 240.
 DENOISE_PIXEL_BYTES = 3 * 12 + 6
 # --directional (lightmap/sh.py): nine more channels a texel: the estimator's float64 sums and the
