@@ -71,6 +71,7 @@ def test_the_ball_is_marked_and_keeps_its_own_material(exported):
     assert material["name"] == "Paint" and "emissiveFactor" not in material
     np.testing.assert_allclose(material["pbrMetallicRoughness"]["baseColorFactor"][:3], probe_scene.BASE, rtol=1e-6)
     assert exported["summary"]["probes"] == 8 and exported["summary"]["probe_lit"] == ["Ball"]
+    assert not any("Ball" in w for w in exported["summary"]["warnings"])  # lit by probes, not a lightmap it lacks
     assert exported["after"] == exported["before"]
 
 

@@ -110,3 +110,20 @@ def test_the_command_line_bakes_probes(tmp_path, capsys, bpy):
     code = main(["bake", str(CORNELL), "--photons", "20000", "--probes", "volumes", "--out", str(tmp_path / "x")])
     assert code != 0 and "no Light Probe Volume" in capsys.readouterr().err
     assert not (tmp_path / "x" / "probes.npz").exists()
+
+
+def test_an_object_lit_by_probes_is_left_out_of_the_bake(cornell, bpy):
+    """Probe Light marks an object that moves: it gets no lightmap and its faces are no geometry of
+    the bake (its shadow at the frame baked would stay on the floor when it moves away); named with
+    --objects it is refused, saying why."""
+    from detp_bake.errors import BakeError
+    bpy.ops.mesh.primitive_cube_add(size=0.4, location=(0.0, 0.0, 0.4))
+    ball = bpy.context.active_object
+    ball.name = "Moving"
+    before = export(bpy)
+    ball["detp_bake"] = {"probe_light": True}
+    after = export(bpy)
+    assert "Moving" in {o.name for o in before.objects} and "Moving" not in {o.name for o in after.objects}
+    assert before.triangle_count - after.triangle_count == 12
+    with pytest.raises(BakeError, match="'Moving' has Probe Light on"):
+        export(bpy, objects=["Moving"])

@@ -205,6 +205,8 @@ def _lightmapped(glb: Path, files: dict) -> tuple[int, list]:
         if "mesh" not in node:
             continue
         seen.add(node.get("name"))
+        if gltf_probes.EXTENSION in (node.get("extensions") or {}):
+            continue  # lit by the probes, not by a lightmap (Probe Light)
         for prim in doc["meshes"][node["mesh"]].get("primitives", []):
             material = doc["materials"][prim["material"]] if "material" in prim else {}
             if EXTENSION in (material.get("extensions") or {}):

@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import BakeError
 from ..probes import grid, lookup, sh9
 from . import sh_nodes
-from .common import PROBE_PROPERTY, REVERT_KEY
+from .common import PROBE_PROPERTY, REVERT_KEY, probe_lit as marked
 from .lightmaps import apply_lightmap, revert
 
 PROBES_KEY = "detp_bake_probes"  # scene custom property: the probes.npz its probe-lit objects read
@@ -101,16 +101,6 @@ def apply_probes(bl_scene, path, objects: list, shared: bool = False) -> list:
         set_sh(obj, sh_at(grids, obj, depsgraph))
     bl_scene[PROBES_KEY] = str(path)
     return list(objects)
-
-
-def marked(obj) -> bool:
-    """The object's Probe Light toggle (the add-on's object setting; read from the stored settings
-    where the add-on is not registered: the command line)."""
-    settings = getattr(obj, "detp_bake", None)
-    if settings is not None and hasattr(settings, "probe_light"):
-        return bool(settings.probe_light)
-    stored = obj.get("detp_bake")
-    return bool(stored is not None and hasattr(stored, "get") and stored.get("probe_light"))
 
 
 def apply_marked(bl_scene, folder, log=None) -> list:
