@@ -44,7 +44,7 @@ def record(benchmark: str, data: dict) -> Path:
     FOLDER.mkdir(exist_ok=True)
     path = FOLDER / f"{benchmark}.json"
     meta = {"commit": commit, "date": datetime.date.today().isoformat(), "cores": os.cpu_count()}
-    path.write_text(json.dumps({"measured": meta, **data}, indent=1, allow_nan=False) + "\n")
+    path.write_text(json.dumps({"recorded": meta, **data}, indent=1, allow_nan=False) + "\n")
     return path
 
 
@@ -62,7 +62,7 @@ def _levels_table(d: dict) -> str:
                                  ("rasterise", "validity", "fragments", "direct", "trace", "estimate", "denoise"))
                     + f" | {r['wall']:.1f} | {r['peak_mb']:,.0f} | {r['oidn_alone']:.1f} | "
                     f"{r.get('oidn_whole', 0):.1f} |")
-    m = d["measured"]
+    m = d["recorded"]
     return "\n".join(rows) + f"\n\n*{d['faces']:,} faces; {m['cores']} cores; commit {m['commit']}, {m['date']}.*\n"
 
 
@@ -76,7 +76,7 @@ def _levels_sentence(d: dict) -> str:
                      f"{s.get('trace', 0):.1f}, estimate {s.get('estimate', 0):.1f}, denoise "
                      f"{s.get('denoise', 0):.1f} (total {r['wall']:.1f}, peak {peak}; OIDN alone on one image "
                      f"of that size {r['oidn_alone']:.1f} in tiles, {r.get('oidn_whole', 0):.1f} whole)")
-    m = d["measured"]
+    m = d["recorded"]
     return _paragraph(f"On a level of {d['faces']:,} faces with a Smart UV unwrap (`benchmarks/levels.py`, "
                       f"defaults, {m['cores']} cores, seconds, commit {m['commit']}): " + "; ".join(parts) + ".")
 
@@ -85,7 +85,7 @@ def _memory_sentence(d: dict) -> str:
     rows = {r["estimator"]: r for r in d["results"]}
     said = [f"{name} at {r['measured_per_texel']:.0f} bytes a texel (estimate {r['estimate_per_texel']:.0f})"
             for name, r in rows.items()]
-    m = d["measured"]
+    m = d["recorded"]
     return _paragraph(f"Measured with `benchmarks/memory.py` ({d['resolution']}² lightmap, {100 * d['gutter']:.0f} % "
                       f"gutter, {d['photons'] / 1e6:.3g}M photons, peak resident memory less that of a 32² bake, "
                       f"{m['cores']} cores, commit {m['commit']}): " + "; ".join(said) + ".")
@@ -95,10 +95,35 @@ def _paragraph(text: str) -> str:
     return textwrap.fill(text, width=96, break_on_hyphens=False) + "\n"
 
 
+def _probe_rows(d: dict) -> str:
+    rows = ["| estimator | setting | seconds | tracing (the bake's) | error | err²·s |", "|---|---|---|---|---|---|"]
+    for r in (r for r in d["rows"] if r["estimator"] != "reference gather"):  # (the reference itself)
+        trace = f"{r['trace_seconds']:.2f} s" if r.get("trace_seconds") else "–"
+        rows.append(f"| {r['estimator']} | {r['setting']} | {r['seconds']:.3f} | {trace} | "
+                    f"{100 * r['error']:.2g} % | {r['error'] ** 2 * r['seconds']:.2g} |")
+    m = d["recorded"]
+    return "\n".join(rows) + f"\n\n*{d['scene']}, {d['measured']} of {d['probes']} probes measured; {m['cores']} cores; " \
+        f"commit {m['commit']}, {m['date']}.*\n"
+
+
+def _probe_cost(d: dict) -> str:
+    c, m = d["cost"], d["recorded"]
+    return _paragraph(
+        f"**Cost.** `benchmarks/probes.py` bakes the {d['scene']}'s {c['object']} at {c['resolution']}² "
+        f"({c['without_photons'] / 1e6:.3g}M photons, shadow rays, OIDN) without probes and with a 16×16×16 Light "
+        f"Probe Volume over the scene ({c['probes']:,} probes, {c['invalid']} of them invalid): the probe stage took "
+        f"{c['probe_seconds']:.2f} s, {100 * c['probe_seconds'] / c['without_seconds']:.1f} % of the "
+        f"{c['without_seconds']:.1f} s bake (the faster of two bakes each, the kernels compiled before; whole bakes "
+        f"{100 * c['added']:+.1f} % wall, which on a shared machine is mostly noise; {m['cores']} cores, commit "
+        f"{m['commit']}).")
+
+
 BLOCKS = {
     "levels.phases": ("levels", _levels_table),
     "levels.sentence": ("levels", _levels_sentence),
     "memory.sentence": ("memory", _memory_sentence),
+    "probes.estimators": ("probes", _probe_rows),
+    "probes.cost": ("probes", _probe_cost),
 }
 
 

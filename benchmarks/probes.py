@@ -149,6 +149,8 @@ def main(argv=None):
     ap.add_argument("--skip-cost", action="store_true")
     ap.add_argument("--only-cost", action="store_true")
     ap.add_argument("--json", default=str(Path(__file__).resolve().parent / "results" / "probes.json"))
+    ap.add_argument("--record", action="store_true",
+                    help="also write benchmarks/measured/probes.json, which docs/probes.md's figures are rendered from")
     args = ap.parse_args(argv)
     rows = [] if args.only_cost else compare(args)
     print(f"{'estimator':<16} {'setting':<28} {'seconds':>8} {'trace s':>8} {'error':>8} {'err²·s':>10}")
@@ -166,6 +168,9 @@ def main(argv=None):
               "of the bake without")
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(doc, indent=2))
+    if args.record:
+        import measured
+        print(f"recorded {measured.record('probes', doc)}")
 
 
 if __name__ == "__main__":
