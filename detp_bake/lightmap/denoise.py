@@ -172,6 +172,8 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     """
     image, mask, albedo, normal, filter = _checked(image, mask, albedo, normal, filter, quality,
                                                    None if callable(weights) else weights, regions)
+    if _all_black(image, mask):  # a part no light reached (a sun-lit crate's soft direct light): 0
+        return np.zeros_like(image)
     runs_mask, smoothed = mask, None
     if fragments is not None and len(fragments):
         runs_mask = mask.copy()
@@ -198,6 +200,19 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     if smoothed is not None:
         result.reshape(-1, 3)[fragments.pixel] = smoothed
     return dilate(result, mask, margin, in_place=True)
+
+
+@numba.njit(cache=True)
+def _all_black(img, mask):
+    """Whether no texel under `mask` holds a positive value (nor NaN: that is refused later)."""
+    h, w, channels = img.shape
+    for y in range(h):
+        for x in range(w):
+            if mask[y, x]:
+                for c in range(channels):
+                    if not img[y, x, c] <= 0.0:
+                        return False
+    return True
 
 
 def _checked(image, mask, albedo, normal, filter, quality, weights, regions) -> tuple:
