@@ -205,8 +205,9 @@ def main(argv=None):
     ap.add_argument("--images", default="", help=argparse.SUPPRESS)
     ap.add_argument("--blend", default="", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if args.quick:
-        args.arena_size, args.crates, args.trace_photons = 128, 60, 400_000
+    if args.quick:  # smaller defaults; what is given stays
+        ap.set_defaults(arena_size=128, crates=60, trace_photons=400_000)
+        args = ap.parse_args(argv)
     if args.child:
         code = Path(args.code)
         if args.child.startswith("build-"):

@@ -123,3 +123,14 @@ def test_levels_benchmark(tmp_path):
     assert methods[0].startswith("ours") and methods[-1] == "Cycles 8 spp + OIDN"
     assert all(0 < r["error"] < 2 and r["seconds"] > 0 for r in data["race"]["rows"])
     assert "Race at 32²" in text
+
+
+@pytest.mark.blender  # its scenes are made in Blender
+def test_phases_benchmark(tmp_path):
+    out = tmp_path / "phases.json"
+    text = _run("phases.py", "--quick", "--cases", "crates", "--crates", "12", "--crate-size", "16", "--repeat", "1",
+                "--json", str(out))
+    data = json.loads(out.read_text())
+    run = data["cases"]["crates"]["after"][0]
+    assert run["texels"] > 12 * 16 and run["photons"] > 0 and set(run["seconds"]) >= {"export", "trace", "denoise"}
+    assert "| **total (wall)** |" in text and data["cases"]["crates"]["images"]["equal"]
