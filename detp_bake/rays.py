@@ -51,6 +51,10 @@ class RayCaster:
                                      np.ascontiguousarray(dirs[a:b], np.float32),
                                      np.ascontiguousarray(far[a:b], np.float32)) >= 0
 
-        with ThreadPoolExecutor(max(1, int(threads))) as pool:
+        if threads <= 1 or len(origins) <= CHUNK:  # no pool (a thread started for each of 1,500 small lightmaps)
+            for a in range(0, len(origins), CHUNK):
+                run(a)
+            return out
+        with ThreadPoolExecutor(int(threads)) as pool:
             list(pool.map(run, range(0, len(origins), CHUNK)))
         return out

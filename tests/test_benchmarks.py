@@ -142,3 +142,14 @@ def test_the_docs_measured_figures_are_the_recorded_ones():
     data = measured.load("levels")
     data["phases"][0]["seconds"]["trace"] += 1.0
     assert measured.BLOCKS["levels.phases"][1](data) != measured.render("levels.phases")
+
+
+@pytest.mark.blender  # its scenes are made in Blender
+def test_phases_benchmark(tmp_path):
+    out = tmp_path / "phases.json"
+    text = _run("phases.py", "--quick", "--cases", "crates", "--crates", "12", "--crate-size", "16", "--repeat", "1",
+                "--json", str(out))
+    data = json.loads(out.read_text())
+    run = data["cases"]["crates"]["after"][0]
+    assert run["texels"] > 12 * 16 and run["photons"] > 0 and set(run["seconds"]) >= {"export", "trace", "denoise"}
+    assert "| **total (wall)** |" in text and data["cases"]["crates"]["images"]["equal"]

@@ -64,3 +64,35 @@ def test_in_an_atlas_the_chart_warning_names_the_fragmented_objects_not_the_atla
     entries = {o["name"]: o["charts"] for o in r.report()["objects"]}
     assert entries["Clean"]["count"] == 1 and entries["Shards"]["count"] == 256
     assert entries["Shards"]["border"] > 0.9 > 0.2 > entries["Clean"]["border"]
+
+
+def test_every_objects_charts_at_once_are_each_objects_alone():
+    """widths_of_objects gives, for a run of objects, each one's charts and widths exactly as
+    chart_widths gives them alone (the same charts, the same floats), objects of no triangles
+    included; two objects whose corners coincide are not joined."""
+    rng = np.random.default_rng(5)
+    parts, bounds, res, at = [], [], [], 0
+    for n in (12, 0, 40, 1, 12):
+        uv = rng.random((n, 3, 2))
+        if n >= 12:  # triangles that share corners: charts of several triangles
+            uv[1::2, 0] = uv[0::2, 1][: len(uv[1::2])]
+            uv[1::2, 1] = uv[0::2, 2][: len(uv[1::2])]
+        pos = rng.random((n, 3, 3)) * (1 + at)
+        if n >= 12:
+            pos[1::2, 0] = pos[0::2, 1][: len(pos[1::2])]
+            pos[1::2, 1] = pos[0::2, 2][: len(pos[1::2])]
+        parts.append((uv, pos))
+        bounds.append((at, at + n))
+        res.append(16 * (1 + len(res)))
+        at += n
+    parts[-1] = parts[0]  # the same corners as the first object: still apart
+    uv = np.concatenate([p[0] for p in parts])
+    pos = np.concatenate([p[1] for p in parts])
+    got = charts.widths_of_objects(uv, pos, bounds, res)
+    for (a, b), r, (chart, width) in zip(bounds, res, got):
+        if a == b:
+            assert len(chart) == 0 and len(width) == 0
+            continue
+        alone_chart, alone_width = charts.chart_widths(uv[a:b], pos[a:b], r)
+        assert np.array_equal(chart, alone_chart) and np.array_equal(width, alone_width)
+    assert len(got[1][1]) == 0 and len(got[2][1]) > 1

@@ -271,16 +271,22 @@ def test_big_lightmaps_denoise_soft_and_indirect_light_in_one_run(monkeypatch):
 def test_tiles_give_the_whole_image(monkeypatch):
     """A lightmap wider than denoise.TILE is denoised in overlapping tiles on OIDN's 16-texel grid at
     the whole image's exposure, over its own scratch image: the same result as OIDN on the whole
-    image (1e-5 of the mean apart here; tiles off the grid moved it by 0.2 % RMS), and the
-    caller's image, given as its own, is reused."""
+    image (1e-5 of the mean apart here; tiles off the grid moved it by 0.2 % RMS), a tile whose
+    core holds no covered texel is not run, and the caller's image, given as its own, is reused."""
     rng = np.random.default_rng(7)
     truth = _point_light(640)[:600]
     mask = np.ones(truth.shape[:2], bool)
     mask[:, 300:306] = False  # a gutter between two charts, across a tile's core
+    mask[:272, :272] = False  # the first tile's core: empty
     raw = _noisy(truth, mask, rng)
     kwargs = {"filter": "RTLightmap", "margin": 0}
+    monkeypatch.setattr(denoise, "WIDE_UNTIL", 0)  # TILE for every size
     assert len(denoise._spans(600)) == 3 and len(denoise._spans(640)) == 3  # nine tiles
+    runs = []
+    real = denoise._execute
+    monkeypatch.setattr(denoise, "_execute", lambda *a: runs.append(a[2].shape) or real(*a))
     tiled = denoise.denoise_lightmap(raw, mask, **kwargs)
+    assert len(runs) == 8  # the empty one left out
     monkeypatch.setattr(denoise, "TILE", 4096)
     whole = denoise.denoise_lightmap(raw, mask, **kwargs)
     assert _rel_rmse(whole, truth, mask) < 0.5 * LEVEL  # it did denoise
@@ -289,6 +295,15 @@ def test_tiles_give_the_whole_image(monkeypatch):
     own = raw.copy()
     out = denoise.denoise_lightmap(own, mask, own=True, **kwargs)
     assert np.array_equal(out, tiled) and np.shares_memory(out, own)
+
+
+def test_wide_tiles_up_to_1024():
+    """Images up to 1024² get tiles of up to WIDE_TILE² (2 × 2 at 1024²: 1.5 times the image's
+    pixels through OIDN, against 2.6 for 4 × 4 tiles of 464²); larger ones keep TILE."""
+    assert denoise.tile_for(1024 * 1024) == denoise.WIDE_TILE
+    assert len(denoise._spans(1024, denoise.tile_for(1024 * 1024))) == 2
+    assert denoise.tile_for(640 * 640) >= 640  # whole
+    assert denoise.tile_for(2048 * 2048) == denoise.TILE and len(denoise._spans(2048, denoise.TILE)) == 8
 
 
 def test_masked_means_match_numpy():

@@ -78,6 +78,58 @@ def chart_widths(uv: np.ndarray, positions: np.ndarray, res: int) -> tuple[np.nd
     return chart, 4.0 * np.bincount(chart, weights=area, minlength=count) / np.maximum(perimeter, 1e-300) * res
 
 
+def widths_of_objects(uv: np.ndarray, positions: np.ndarray, bounds, res) -> list:
+    """[(chart of each triangle, each chart's width in texels)] of objects whose triangles are
+    `uv[a:b]`, `positions[a:b]` for each (a, b) of `bounds` (in order, not overlapping), at
+    `res[k]`² texels: what `chart_widths` gives object by object, the same numbers, in one pass
+    (a level of 1,500 crates: 1,500 passes of a few small arrays each took seconds). An object's
+    corners are keyed with its index first, so no two objects share a corner and each object's
+    corners, edges and charts keep the order they have alone."""
+    bounds = np.asarray(bounds, np.int64).reshape(-1, 2)
+    if len(bounds) == 0:
+        return []
+    counts = bounds[:, 1] - bounds[:, 0]
+    if not counts.any():
+        return [(np.zeros(0, np.int64), np.zeros(0)) for _ in counts]
+    tri = np.concatenate([np.arange(a, b) for a, b in bounds]) if len(bounds) > 1 else np.arange(*bounds[0])
+    obj = np.repeat(np.arange(len(bounds)), counts)
+    u = np.asarray(uv[tri], np.float64)
+    p = np.asarray(positions[tri], np.float64).reshape(-1, 3)
+    starts = 3 * (np.cumsum(counts) - counts)
+    lo = np.minimum.reduceat(p, starts[counts > 0], axis=0)
+    span = np.maximum.reduceat(p, starts[counts > 0], axis=0).max(axis=1) - lo.min(axis=1)
+    at = np.repeat(np.cumsum(counts > 0) - 1, 3 * counts)
+    key = np.concatenate([np.repeat(obj, 3)[:, None].astype(np.float64), np.round(u.reshape(-1, 2) * 1e6),
+                          np.round((p - lo[at]) / np.maximum(span, 1e-300)[at, None] * 1e6)], axis=1)
+    corner = _rows(key.astype(np.int64))[0].reshape(-1, 3)
+    del key
+    _, chart = chart_of_triangles(u, None, corner)
+    _, chart = np.unique(obj * (int(chart.max(initial=0)) + 1) + chart, return_inverse=True)
+    chart = chart.reshape(-1)
+    count = int(chart.max(initial=-1)) + 1
+    area = 0.5 * np.abs((u[:, 1, 0] - u[:, 0, 0]) * (u[:, 2, 1] - u[:, 0, 1])
+                        - (u[:, 1, 1] - u[:, 0, 1]) * (u[:, 2, 0] - u[:, 0, 0]))
+    edges = np.sort(np.stack([corner[:, [0, 1]], corner[:, [1, 2]], corner[:, [2, 0]]], axis=1), axis=2).reshape(-1, 2)
+    length = np.linalg.norm(np.stack([u[:, 1] - u[:, 0], u[:, 2] - u[:, 1], u[:, 0] - u[:, 2]], axis=1),
+                            axis=2).reshape(-1)
+    _, first, times = _rows(edges)
+    outer = first[times == 1]
+    perimeter = np.bincount(np.repeat(chart, 3)[outer], weights=length[outer], minlength=count)
+    width = 4.0 * np.bincount(chart, weights=area, minlength=count) / np.maximum(perimeter, 1e-300)
+    tstart = np.cumsum(counts) - counts
+    full = counts > 0
+    first_chart = np.append(np.minimum.reduceat(chart, tstart[full]), count)  # each object's charts: a run
+    out, k = [], 0
+    for a, n, r in zip(tstart, counts, res):
+        if n == 0:
+            out.append((np.zeros(0, np.int64), np.zeros(0)))
+            continue
+        c0, c1 = first_chart[k], first_chart[k + 1]
+        out.append((chart[a:a + n] - c0, width[c0:c1] * r))
+        k += 1
+    return out
+
+
 def _border(owner: np.ndarray, res: int) -> np.ndarray:
     """(res, res) bool: covered texels with a 4-neighbour of another chart (or none); `owner` the
     (res²,) chart of each texel, −1 where none."""
@@ -90,13 +142,14 @@ def _border(owner: np.ndarray, res: int) -> np.ndarray:
 
 
 def chart_stats(uv: np.ndarray, positions: np.ndarray, res: int, pixel: np.ndarray,
-                texel_tri: np.ndarray) -> tuple[int, float, float]:
+                texel_tri: np.ndarray, widths=None) -> tuple[int, float, float]:
     """(charts, median chart width in texels, share of border texels) of one object's lightmap of
     `res`² texels: `uv` its (T, 3, 2) UVs, `positions` its (T, 3, 3) corners, `pixel` its covered
-    texels and `texel_tri` their triangles (indices into `uv`)."""
+    texels and `texel_tri` their triangles (indices into `uv`); `widths`: its `chart_widths`, if
+    known (`widths_of_objects`)."""
     if len(uv) == 0 or len(pixel) == 0:
         return 0 if len(uv) == 0 else chart_of_triangles(uv, positions)[0], 0.0, 0.0
-    chart, width = chart_widths(uv, positions, res)
+    chart, width = chart_widths(uv, positions, res) if widths is None else widths
     owner = np.full(res * res, -1, np.int64)
     owner[pixel] = chart[texel_tri]
     return len(width), float(np.median(width)), float(_border(owner, res).sum()) / len(pixel)

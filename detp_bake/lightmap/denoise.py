@@ -61,6 +61,11 @@ FILL_RINGS = 16
 MIN_REGION = 64  # texels: a region walled off from its neighbours is denoised only from this size
 MAX_MEMORY_MB = 256  # OIDN's maxMemoryMB: more than a TILE² tile needs untiled (111 MB)
 TILE = 464  # the widest image OIDN gets at once (module docstring)
+# Up to WIDE_UNTIL pixels an image gets tiles of up to WIDE_TILE²: 2 × 2 tiles at 1024² hand OIDN
+# 1.5 times the image's pixels where 464² tiles hand it 2.6 times (4 × 4), and its scratch (about
+# 290 MB) is what a 1024² bake can spare; larger images keep TILE, their memory bound.
+WIDE_TILE = 720
+WIDE_UNTIL = 1024 * 1024
 TILE_OVERLAP = 96  # context on each side of a tile, a multiple of TILE_ALIGN (module docstring)
 TILE_ALIGN = 16  # OIDN's network pools by 2 four times: tiles start on its 16-texel grid
 LUMA = np.array([0.212671, 0.715160, 0.072169], np.float32)  # OIDN's luminance weights (autoexposure)
@@ -168,6 +173,8 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     """
     image, mask, albedo, normal, filter = _checked(image, mask, albedo, normal, filter, quality,
                                                    None if callable(weights) else weights, regions)
+    if _all_black(image, mask):  # a part no light reached (a sun-lit crate's soft direct light): 0
+        return np.zeros_like(image)
     runs_mask, smoothed = mask, None
     if fragments is not None and len(fragments):
         runs_mask = mask.copy()
@@ -194,6 +201,19 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     if smoothed is not None:
         result.reshape(-1, 3)[fragments.pixel] = smoothed
     return dilate(result, mask, margin, in_place=True)
+
+
+@numba.njit(cache=True)
+def _all_black(img, mask):
+    """Whether no texel under `mask` holds a positive value (nor NaN: that is refused later)."""
+    h, w, channels = img.shape
+    for y in range(h):
+        for x in range(w):
+            if mask[y, x]:
+                for c in range(channels):
+                    if not img[y, x, c] <= 0.0:
+                        return False
+    return True
 
 
 def _checked(image, mask, albedo, normal, filter, quality, weights, regions) -> tuple:
@@ -353,7 +373,7 @@ def _denoise_part(image, mask, albedo, normal, filter, keep_energy, quality, wei
         if normal is not None:
             kwargs["normal"] = fill_gutter(_covered("normal guide", normal, mask), mask)
     try:
-        result = _run_filter(color, filter, quality, **kwargs)
+        result = _run_filter(color, filter, quality, need=mask, **kwargs)
     except (RuntimeError, ValueError, TypeError, OSError) as exc:  # OSError: OIDN's .so loads now
         raise BakeError(f"denoise: OIDN failed on a {image.shape[1]}x{image.shape[0]} lightmap "
                         f"({filter}): {exc}") from exc
@@ -401,20 +421,27 @@ def _exposure(color: np.ndarray) -> float:
     return float(0.18 / np.exp2(np.log2(bright).mean())) if bright.size else 1.0
 
 
-def _spans(n: int) -> list:
-    """[(start, stop)] cores of one axis, each TILE less its overlaps wide (the last one less),
-    starting on multiples of TILE_ALIGN: a tile's pooling grid is then the whole image's."""
-    core = (TILE - 2 * TILE_OVERLAP) // TILE_ALIGN * TILE_ALIGN
+def tile_for(pixels: int) -> int:
+    """The widest tile OIDN gets of an image of `pixels` pixels (WIDE_TILE, TILE)."""
+    return max(WIDE_TILE, TILE) if pixels <= WIDE_UNTIL else TILE
+
+
+def _spans(n: int, tile: int = 0) -> list:
+    """[(start, stop)] cores of one axis, each `tile` (TILE) less its overlaps wide (the last one
+    less), starting on multiples of TILE_ALIGN: a tile's pooling grid is then the whole image's."""
+    core = ((tile or TILE) - 2 * TILE_OVERLAP) // TILE_ALIGN * TILE_ALIGN
     return [(a, min(a + core, n)) for a in range(0, n, core)]
 
 
 def _run_filter(color: np.ndarray, filter: str, quality: int, hdr: bool = False, clean_aux: bool = False,
-                albedo: Optional[np.ndarray] = None, normal: Optional[np.ndarray] = None) -> np.ndarray:
-    """OIDN on one image, in tiles when it is wider than TILE (module docstring), through one
-    filter released on return. A tiled image is denoised over `color` itself (a float32 scratch
-    image, every caller's): a band of tiles is written back once the band below it, whose tiles
-    read TILE_OVERLAP rows into it, is done (every core is wider than the overlap), so no second
-    full-size image is made."""
+                albedo: Optional[np.ndarray] = None, normal: Optional[np.ndarray] = None,
+                need: Optional[np.ndarray] = None) -> np.ndarray:
+    """OIDN on one image, in tiles when it is wider than `tile_for` its pixels (module docstring),
+    through one filter released on return. A tiled image is denoised over `color` itself (a float32
+    scratch image, every caller's): a band of tiles is written back once the band below it, whose
+    tiles read TILE_OVERLAP rows into it, is done (every core is wider than the overlap), so no
+    second full-size image is made. `need`: (H, W) bool, the texels whose output is read; a tile
+    whose core holds none of them is not run (its core keeps `color`'s values)."""
     pyoidn = _pyoidn()
     device = _device_once()
     guides = {name: img for name, img in (("albedo", albedo), ("normal", normal)) if img is not None}
@@ -427,14 +454,17 @@ def _run_filter(color: np.ndarray, filter: str, quality: int, hdr: bool = False,
             flt.set_bool("cleanAux", clean_aux)
         flt.set_int("quality", quality)
         flt.set_int("maxMemoryMB", MAX_MEMORY_MB)
-        if h <= TILE and w <= TILE:
+        widest = tile_for(h * w)
+        if h <= widest and w <= widest:
             return _execute(flt, pyoidn, color, guides)
         flt.set_float("inputScale", _exposure(color))
         done = None  # the last band of tiles, written over `color` once the next band has read it
-        for r0, r1 in _spans(h):
+        for r0, r1 in _spans(h, widest):
             rows = slice(max(r0 - TILE_OVERLAP, 0), min(r1 + TILE_OVERLAP, h))
-            band = np.empty((r1 - r0, w, 3), np.float32)
-            for c0, c1 in _spans(w):
+            band = np.array(color[r0:r1])
+            for c0, c1 in _spans(w, widest):
+                if need is not None and not need[r0:r1, c0:c1].any():
+                    continue
                 cols = slice(max(c0 - TILE_OVERLAP, 0), min(c1 + TILE_OVERLAP, w))
                 tile = _execute(flt, pyoidn, color[rows, cols], {k: g[rows, cols] for k, g in guides.items()})
                 band[:, c0:c1] = tile[r0 - rows.start:r1 - rows.start, c0 - cols.start:c1 - cols.start]

@@ -75,19 +75,23 @@ class BatchNoise:
         after every block of batches, and a whole-bake float64 RGB copy is 80 MB)."""
         if self.groups < 2:
             return {}
-        spreads, level, count = {}, 0.0, 0
-        for lm in lightmaps:
-            spread = 0.0
-            for start in range(lm.offset, lm.offset + lm.count, chunk):
-                stop = min(start + chunk, lm.offset + lm.count)
-                spread += float(self.variance(start, stop).sum())
-                level += float(np.sum(luminance(start, stop)))
-            spreads[lm.name] = (spread, lm.count)
-            count += lm.count
-        mean = level / count if count else 0.0
+        first = np.array([lm.offset for lm in lightmaps], np.int64)
+        end = first + np.array([lm.count for lm in lightmaps], np.int64)
+        spread, level = np.zeros(len(lightmaps)), np.zeros(len(lightmaps))
+        # Chunks of the bake's texels, each lightmap's share of a chunk summed from its running sums:
+        # a level of 1,500 small lightmaps reads its noise in a few numpy calls, not 1,500 × 4.
+        for start in range(int(first.min(initial=0)), int(end.max(initial=0)), chunk):
+            stop = min(start + chunk, int(end.max()))
+            lo, hi = np.clip(first - start, 0, stop - start), np.clip(end - start, 0, stop - start)
+            for out, values in ((spread, self.variance(start, stop)), (level, luminance(start, stop))):
+                running = np.concatenate([[0.0], np.cumsum(values, dtype=np.float64)])
+                out += running[hi] - running[lo]
+        count = int((end - first).sum())
+        mean = float(level.sum()) / count if count else 0.0
         if not mean > 0.0:
             return {}
-        return {name: float(np.sqrt(spread / n) / mean) if n else 0.0 for name, (spread, n) in spreads.items()}
+        return {lm.name: float(np.sqrt(max(v, 0.0) / lm.count) / mean) if lm.count else 0.0
+                for lm, v in zip(lightmaps, spread)}
 
     def unmeasured(self, photons: int) -> str:
         """Why `relative` is empty after a bake of `photons` photons."""

@@ -332,7 +332,12 @@ def rasterise(scene: Scene) -> TexelSet:
     offset = 0
     world_area, uv_area = _areas(scene)
     uv = scene.uvs.astype(np.float64)
-    for name, members in images(scene):
+    groups = images(scene)
+    alone = [scene.objects[m[0]] for _, m in groups if not scene.objects[m[0]].image]
+    widths = dict(zip((o.name for o in alone), charts_mod.widths_of_objects(  # every object's charts at once
+        uv, scene.positions, [(o.first_triangle, o.first_triangle + o.triangle_count) for o in alone],
+        [int(o.resolution) for o in alone])))
+    for name, members in groups:
         index, obj = members[0], scene.objects[members[0]]
         res = int(obj.resolution)
         if res <= 0:
@@ -341,7 +346,8 @@ def rasterise(scene: Scene) -> TexelSet:
         sl = lightmap_triangles(scene, lm) if obj.image else obj.triangles
         first = sl if obj.image else int(obj.first_triangle)
         pixel, tri, local, area, centre, doubled = _cover(lm, uv[sl], world_area[sl], res, first)
-        lm.charts, lm.chart_width, lm.border = charts_mod.chart_stats(uv[sl], scene.positions[sl], res, pixel, local)
+        lm.charts, lm.chart_width, lm.border = charts_mod.chart_stats(uv[sl], scene.positions[sl], res, pixel, local,
+                                                                      widths.get(obj.name) if not obj.image else None)
         lm.count, lm.texel_size = len(pixel), _texel_size(world_area, uv_area, sl, res)
         if obj.image:
             lm.placement = _placement(scene, members, tri, pixel, res, world_area, uv_area)

@@ -42,11 +42,12 @@ TEXEL_BYTES = 61 + 2 * 12 + 6 + 12 + 4
 # the image before denoising is made only when asked (results.RawImages).
 PIXEL_BYTES = 12 + 4 + 2
 # Denoising, one lightmap at a time: OIDN's scratch, about 560 bytes a pixel of an image it gets
-# whole, and it gets at most denoise.TILE² at once (at most 115 MB; at 2048² its tiles of up to
-# 464² took 87 MB), and the float32 images the denoiser works on beside it: the part being denoised
-# (OIDN writes over it), the part denoised before it, the sharp lights' part added after.
+# whole, and it gets at most denoise.tile_for(pixels)² at once (464² from 1024² up: at most 115 MB;
+# at 2048² its tiles of up to 464² took 87 MB; 720² up to 1024²: at most 290 MB), and the float32
+# images the denoiser works on beside it: the part being denoised (OIDN writes over it), the part
+# denoised before it, the sharp lights' part added after.
 OIDN_BYTES_PER_PIXEL = 560
-OIDN_MOST = 115_000_000
+OIDN_MOST = 115_000_000  # for tiles of denoise.TILE², in proportion for wider ones
 # Measured (benchmarks/memory.py, 2048², 5 % gutter, 2 cores; benchmarks/measured/memory.json): the
 # texel histogram at 1M photons peaks at 106 bytes a texel (348 before the tiles and the cuts that
 # came with them; its positions and normals are set aside from tracing to the last image); the
@@ -132,7 +133,9 @@ def estimate(pixels: int, estimator_bytes: dict, batch: int, per_photon_all: flo
     if denoised_pixels:
         # Each estimator is let go before its lightmaps are denoised (bake.py): the denoiser needs
         # only what is more than the smallest estimator's state, which it takes over.
-        denoiser = min(denoised_pixels * OIDN_BYTES_PER_PIXEL, OIDN_MOST) + denoised_pixels * DENOISE_PIXEL_BYTES
+        widest = (denoise_mod.tile_for(denoised_pixels) / denoise_mod.TILE) ** 2
+        denoiser = min(denoised_pixels * OIDN_BYTES_PER_PIXEL, int(OIDN_MOST * widest)) \
+            + denoised_pixels * DENOISE_PIXEL_BYTES
         freed = min((pixels * b for b in estimator_bytes.values()), default=0)
         parts["denoiser"] = int(max(0, denoiser - freed))
     return Estimate(pixels, parts)
