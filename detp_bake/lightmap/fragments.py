@@ -23,6 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .charts import chart_widths
+from ..sampling import jit
 from ..bvh import discs_meet_triangles
 from .texels import TexelSet, geometric_normals, lightmap_triangles
 from .validity import blocked_between
@@ -31,6 +32,9 @@ FRAGMENT = 8.0  # texels: charts narrower than this (charts.py's width) are not 
 NEIGHBOURS = 24  # texels in each fragment texel's mean, itself included
 SIGMA = 1.5  # the Gaussian's width, texel sizes; neighbours beyond 3 SIGMA are left out
 COS = 0.9  # shading normals at least this aligned count as one surface
+PASS_NOISE = 0.33  # relative noise (noise.py) up to which fragments take one weighted mean (passes_for)
+MAX_PASSES = 32  # the most weighted means taken in turn: each widens the kernel along the surface
+STARVED = 0.5  # a lightmap's relative noise over which all its texels are smoothed here, none by OIDN
 LIFT = 0.25  # texel sizes: rays between neighbours pass this far above the surface (over a convex curve's chord)
 
 
@@ -41,15 +45,50 @@ class Fragments:
     pixel: np.ndarray  # (F,) int64
     neighbour: np.ndarray  # (F, K) int32
     weight: np.ndarray  # (F, K) float32
+    passes: int = 1  # weighted means taken in turn (smooth)
 
     def __len__(self) -> int:
         return len(self.pixel)
 
-    def smooth(self, image: np.ndarray) -> np.ndarray:
-        """(F, 3) float32: each fragment texel's weighted mean of its neighbours in `image` (H, W, 3)."""
-        flat = image.reshape(-1, image.shape[-1])
-        total = np.einsum("fk,fkc->fc", self.weight, flat[self.neighbour], dtype=np.float64)
-        return (total / self.weight.sum(axis=1, dtype=np.float64)[:, None]).astype(np.float32)
+    def smooth(self, image: np.ndarray, passes: int | None = None) -> np.ndarray:
+        """(F, 3) float32: each fragment texel's weighted mean of its neighbours in `image` (H, W, 3),
+        taken `passes` times (the lightmap's, passes_for, by default), each pass over the last one's means where the
+        neighbour is itself a fragment texel (module docstring)."""
+        flat = np.ascontiguousarray(image.reshape(-1, image.shape[-1]), np.float32)
+        row = np.full(len(flat), -1, np.int32)
+        row[self.pixel] = np.arange(len(self.pixel), dtype=np.int32)
+        out = np.empty((len(self.pixel), flat.shape[1]), np.float32)
+        _passes(flat, self.neighbour, self.weight, row[self.neighbour], self.passes if passes is None else passes, out)
+        return out
+
+
+@jit
+def _passes(flat, neighbour, weight, row, passes, out):
+    """`passes` weighted means of each fragment texel's neighbours (`neighbour`, flat pixel
+    indices into `flat`; `row`, their rows among the fragment texels, −1 for a texel that is
+    not one and keeps its value in `flat`), the last into `out`. Sums in float64."""
+    f_count, k_count, c_count = neighbour.shape[0], neighbour.shape[1], flat.shape[1]
+    now = np.empty((f_count, c_count))
+    last = np.empty((f_count, c_count))
+    for p in range(passes):
+        for f in range(f_count):
+            total = 0.0
+            for c in range(c_count):
+                now[f, c] = 0.0
+            for k in range(k_count):
+                w = np.float64(weight[f, k])
+                if w == 0.0:
+                    continue
+                total += w
+                r = row[f, k]
+                for c in range(c_count):
+                    now[f, c] += w * (last[r, c] if p > 0 and r >= 0 else np.float64(flat[neighbour[f, k], c]))
+            for c in range(c_count):
+                now[f, c] = now[f, c] / total if total > 0.0 else 0.0
+        now, last = last, now
+    for f in range(f_count):
+        for c in range(c_count):
+            out[f, c] = np.float32(last[f, c])
 
 
 def fragment_texels(texels: TexelSet, lm, scene) -> np.ndarray:
@@ -61,10 +100,21 @@ def fragment_texels(texels: TexelSet, lm, scene) -> np.ndarray:
     return np.flatnonzero(width[chart[own]] < FRAGMENT)
 
 
-def find(texels: TexelSet, lm, scene, caster, threads: int = 1) -> Fragments | None:
+def passes_for(noise) -> int:
+    """How many weighted means a lightmap's fragments take in turn (Fragments.smooth), from its
+    measured relative noise (noise.py; None when unmeasured): one at PASS_NOISE or less, then as
+    the variance grows, up to MAX_PASSES."""
+    if noise is None or not noise > PASS_NOISE:
+        return 1
+    return int(min(MAX_PASSES, round((noise / PASS_NOISE) ** 2)))
+
+
+def find(texels: TexelSet, lm, scene, caster, threads: int = 1, noise=None) -> Fragments | None:
     """The fragments of lightmap `lm` and their neighbours (module docstring), or None when it has
-    none."""
-    local = fragment_texels(texels, lm, scene)
+    none: the texels of its narrow charts, or all its texels when its measured relative noise
+    (`noise`: {lightmap name: noise.py's figure}, as far as measured) is over STARVED."""
+    level = (noise or {}).get(lm.name)
+    local = np.arange(lm.count) if level is not None and level > STARVED else fragment_texels(texels, lm, scene)
     if local.size == 0:
         return None
     sl = lm.texels
@@ -94,4 +144,4 @@ def find(texels: TexelSet, lm, scene, caster, threads: int = 1) -> Fragments | N
     alone = ~(weight.sum(axis=1) > 0)  # a texel of no area with every neighbour hidden keeps its own value
     near[alone, 0], weight[alone, 0] = local[alone], 1.0
     pixel = texels.pixel[sl].astype(np.int64)
-    return Fragments(pixel[local], pixel[near].astype(np.int32), weight.astype(np.float32))
+    return Fragments(pixel[local], pixel[near].astype(np.int32), weight.astype(np.float32), passes_for(level))

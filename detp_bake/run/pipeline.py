@@ -275,7 +275,7 @@ class Pipeline:
     def results(self, lay: Layout, light: Direct, est: Estimation, traced: Traced) -> dict:
         """Each estimator's lightmaps, denoised by region and with the fragments smoothed."""
         self.estimate_progress(0.0)
-        ending = _Ending(lay, traced, self._fragments(lay))
+        ending = _Ending(lay, traced, self._fragments(lay, traced))
         results = {name: self._result(name, lay, light, est, ending) for name in self.names}
         if self.offset.any():
             lay.texels.position += self.offset  # back where the texels are, in world space
@@ -335,13 +335,15 @@ class Pipeline:
         return "photons"
 
     # The results' helpers ---------------------------------------------------------------------------
-    def _fragments(self, lay: Layout) -> Optional[Callable]:
+    def _fragments(self, lay: Layout, traced: Traced) -> Optional[Callable]:
         """Texels of charts too narrow for OIDN take their neighbours' mean on the surface (fragments.py),
-        found lightmap by lightmap as each is denoised; a comparison's estimators share them (one
-        bake keeps none after its lightmap is done). None without denoising."""
+        found lightmap by lightmap as each is denoised, and so do all texels of a lightmap whose
+        measured noise is over fragments.STARVED (the noisier, the wider); a comparison's estimators share them (one bake
+        keeps none after its lightmap is done). None without denoising."""
         if not self.settings.denoise:
             return None
-        find = partial(fragments_mod.find, lay.texels, scene=self.scene, caster=lay.caster, threads=self.threads)
+        find = partial(fragments_mod.find, lay.texels, scene=self.scene, caster=lay.caster, threads=self.threads,
+                       noise=dict(traced.current))
         if len(self.names) == 1:
             return find
         found = {}
