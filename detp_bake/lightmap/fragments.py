@@ -14,6 +14,15 @@ along the surface (a ray between the two, lifted LIFT texels off it, meets nothi
 between; rays are cast only from texels whose lifted disc of reach some triangle crosses), weighted by their area and a Gaussian of SIGMA texels. For the texel histogram this is the
 count of landings over a patch of surface about three texels wide, across the charts' seams. On the
 plane above: 2.8 % error per texel, the mean within 0.3 %.
+
+Where photons are few a texel (a small object at a fixed resolution: a chair's label, a sofa's legs),
+one such mean is still noisy, and so is OIDN's image. So the mean is taken again over the last
+pass's means (`passes_for`: as many passes as the lightmap's measured noise asks, noise.py), which
+widens the kernel along the surface through the same neighbours and rays (no new ones, so no
+wall is crossed), and a lightmap whose noise is over STARVED is smoothed here whole instead of by
+OIDN. On the downloaded living room (benchmarks/race.py, 128² per object, 1M photons, against
+Cycles at 512 samples): 11.2 % error per texel with one pass and OIDN on every chart wide enough,
+6.2 % so (the label 221 → 44 %, the legs 115 → 50 %, walls and floor unchanged).
 """
 from __future__ import annotations
 

@@ -12,7 +12,9 @@ line up with the light's own Hammersley samples in bases 2 and 1/n), rotated per
 when it lies on the texel's triangle (Cycles mirrors it back onto the triangle). A point off the
 triangle (a texel at a chart's border, partly covered) is replaced by the next point of the
 sequence, a few times, then by the texel's own position: the rays stay on the covered part, so seams
-keep their values.
+keep their values. A light that adds rays only where a texel's first ones disagree (a point light or
+a sharp sun) starts those first ones at the square's corners (`probe_point`), so that no straight
+shadow edge crossing the square goes unseen.
 """
 from __future__ import annotations
 
