@@ -43,7 +43,7 @@ SIGMA = 1.5  # the Gaussian's width, texel sizes; neighbours beyond 3 SIGMA are 
 COS = 0.9  # shading normals at least this aligned count as one surface
 PASS_NOISE = 0.33  # relative noise (noise.py) up to which fragments take one weighted mean (passes_for)
 MAX_PASSES = 32  # the most weighted means taken in turn: each widens the kernel along the surface
-STARVED = 0.5  # a lightmap's relative noise over which all its texels are smoothed here, none by OIDN
+STARVED = 0.3  # a lightmap's relative noise over which all its texels are smoothed here, none by OIDN
 LIFT = 0.25  # texel sizes: rays between neighbours pass this far above the surface (over a convex curve's chord)
 
 
