@@ -19,9 +19,10 @@ Where photons are few a texel (a small object at a fixed resolution: a chair's l
 one such mean is still noisy, and so is OIDN's image. So the mean is taken again over the last
 pass's means (`passes_for`: as many passes as the lightmap's measured noise asks, noise.py), which
 widens the kernel along the surface through the same neighbours and rays (no new ones, so no
-wall is crossed), and a lightmap whose noise is over STARVED is smoothed here whole instead of by
-OIDN. On the downloaded living room (benchmarks/race.py, 128² per object, 1M photons, against
-Cycles at 512 samples): 11.2 % error per texel with one pass and OIDN on every chart wide enough,
+wall is crossed), and a lightmap whose noise is over STARVED has its charts narrower than
+STARVED_WIDTH smoothed here instead of by OIDN (which still cleans a wide chart best). On the
+downloaded living room (benchmarks/race.py, 128² per object, 1M photons, against Cycles at 512
+samples): 11.2 % error per texel with one pass and OIDN on every chart wide enough,
 6.2 % so (the label 221 → 44 %, the legs 115 → 50 %, walls and floor unchanged).
 """
 from __future__ import annotations
@@ -43,7 +44,9 @@ SIGMA = 1.5  # the Gaussian's width, texel sizes; neighbours beyond 3 SIGMA are 
 COS = 0.9  # shading normals at least this aligned count as one surface
 PASS_NOISE = 0.33  # relative noise (noise.py) up to which fragments take one weighted mean (passes_for)
 MAX_PASSES = 32  # the most weighted means taken in turn: each widens the kernel along the surface
-STARVED = 0.3  # a lightmap's relative noise over which all its texels are smoothed here, none by OIDN
+STARVED = 0.3  # a lightmap's relative noise over which charts up to STARVED_WIDTH are smoothed here
+STARVED_WIDTH = 32.0  # texels: a starved lightmap's charts narrower than this skip OIDN (wider ones it still
+# cleans best: a 64-texel plane at 10 photons a texel, 7.9 % per texel by OIDN, 10.5 % smoothed)
 LIFT = 0.25  # texel sizes: rays between neighbours pass this far above the surface (over a convex curve's chord)
 
 
@@ -100,13 +103,13 @@ def _passes(flat, neighbour, weight, row, passes, out):
             out[f, c] = np.float32(last[f, c])
 
 
-def fragment_texels(texels: TexelSet, lm, scene) -> np.ndarray:
+def fragment_texels(texels: TexelSet, lm, scene, narrower: float = FRAGMENT) -> np.ndarray:
     """Indices (within lightmap `lm`'s texels) of those whose triangle's chart is narrower than
-    FRAGMENT texels."""
+    `narrower` texels."""
     sl = lightmap_triangles(scene, lm)
     chart, width = chart_widths(scene.uvs[sl], scene.positions[sl], lm.width)
     own = np.searchsorted(sl, texels.triangle[lm.texels])
-    return np.flatnonzero(width[chart[own]] < FRAGMENT)
+    return np.flatnonzero(width[chart[own]] < narrower)
 
 
 def passes_for(noise) -> int:
@@ -120,10 +123,12 @@ def passes_for(noise) -> int:
 
 def find(texels: TexelSet, lm, scene, caster, threads: int = 1, noise=None) -> Fragments | None:
     """The fragments of lightmap `lm` and their neighbours (module docstring), or None when it has
-    none: the texels of its narrow charts, or all its texels when its measured relative noise
-    (`noise`: {lightmap name: noise.py's figure}, as far as measured) is over STARVED."""
+    none: the texels of its charts narrower than FRAGMENT texels, or than STARVED_WIDTH when its
+    measured relative noise (`noise`: {lightmap name: noise.py's figure}, as far as measured) is
+    over STARVED."""
     level = (noise or {}).get(lm.name)
-    local = np.arange(lm.count) if level is not None and level > STARVED else fragment_texels(texels, lm, scene)
+    starved = level is not None and level > STARVED
+    local = fragment_texels(texels, lm, scene, STARVED_WIDTH if starved else FRAGMENT)
     if local.size == 0:
         return None
     sl = lm.texels
