@@ -3,13 +3,15 @@ shadow rays against Cycles' own bake of the same texels, per texel, with the err
 a shadow edge crosses apart from the rest.
 
     python benchmarks/shadow_edges.py [--resolution 64] [--samples 4,16,64] [--reference-spp 1024]
-        [--reference FILE.npz] [--code DIR] [--json OUT]
+        [--sun-angle DEG] [--reference FILE.npz] [--code DIR] [--json OUT]
 
 Without sky and bounces a texel's value is the sun's irradiance over the texel's footprint; Cycles
 averages it over its jittered samples, so with many samples it is the covered share. A texel is on
 an edge when the reference there lies between EDGE_LOW and EDGE_HIGH of the brightest texel of its
 3 × 3 neighbourhood in the same image. Errors are relative RMS per texel (over the reference's
 mean on those texels), all baked objects together, for each `--samples` (shadow rays per texel).
+`--sun-angle` sets the sun's angular diameter (the scene's is 0.5°, a light with extent: `samples`
+rays per texel; 0 makes it sharp: four first rays, more where they disagree).
 """
 from __future__ import annotations
 
@@ -49,6 +51,7 @@ def main(argv=None):
     ap.add_argument("--resolution", type=int, default=64)
     ap.add_argument("--samples", default="4,16,64")
     ap.add_argument("--reference-spp", type=int, default=1024)
+    ap.add_argument("--sun-angle", type=float, default=None, help="degrees; default: the scene's")
     ap.add_argument("--reference", default="")
     ap.add_argument("--code", default=str(ROOT))
     ap.add_argument("--json", default=str(ROOT / "benchmarks" / "results" / "shadow_edges.json"))
@@ -61,6 +64,11 @@ def main(argv=None):
     bpy.ops.wm.open_mainfile(filepath=str(ROOT / "sample_scenes" / "courtyard.blend"))
     scene = bpy.context.scene
     scene.world = None  # the sun alone
+    if args.sun_angle is not None:
+        import math
+        for ob in scene.objects:
+            if ob.type == "LIGHT" and ob.data.type == "SUN":
+                ob.data.angle = math.radians(args.sun_angle)
     names = list(OBJECTS)
     res = args.resolution
     ref_path = Path(args.reference) if args.reference else None
@@ -92,7 +100,8 @@ def main(argv=None):
         print(f"{samples:4d} rays: edge texels {row['edge_texels']:5d} error {100 * row['edge_error']:6.2f} %, "
               f"others {100 * row['rest_error']:6.2f} %, all {100 * row['all_error']:6.2f} %, "
               f"mean {100 * row['mean']:+.2f} %, {seconds:.1f} s", flush=True)
-    doc = {"resolution": res, "reference_spp": args.reference_spp, "code": args.code, "rows": rows}
+    doc = {"resolution": res, "reference_spp": args.reference_spp, "sun_angle": args.sun_angle, "code": args.code,
+           "rows": rows}
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(doc, indent=1))
