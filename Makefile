@@ -115,7 +115,8 @@ viewer: viewer-node
 	@exec python3 viewer/serve.py --port $(VIEWER_PORT) $(if $(MODEL),--model "$(MODEL)")
 
 # Extension zips, one per Blender line and platform of blender_manifest.toml, each with that line's
-# wheels only (cp311 for 4.5, cp313 for 5.2; numpy is Blender's own):
+# wheels only (cp311 for 4.5, cp313 for 5.2; numpy and OpenImageIO are Blender's own, pyoidn on Linux
+# has its CPU device only):
 # dist/detp_bake-<version>-blender<line>-<platform>.zip. Built by Blender's own extension tool, which
 # the bpy wheel ships as a standalone script; the wheels are downloaded once into .cache/.
 BLENDER_EXT = $(firstword $(wildcard $(VENV45)/lib/python3.11/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py))

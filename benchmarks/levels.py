@@ -17,7 +17,8 @@ Three parts, each a table:
   samples (denoised by `denoise_lightmap(filter="RT")`, as benchmarks/quality.py does), with
   seconds; the last column is each method's time over Cycles + OIDN's time at about the same error.
 
-Writes OUT/levels.json and OUT/levels.md (default benchmarks/results). About 10 minutes on 2 cores
+Writes OUT/levels.json and OUT/levels.md (default benchmarks/results); with `--record` also
+benchmarks/measured/levels.json, from which the docs' figures are rendered (measured.py). About 10 minutes on 2 cores
 with the defaults; `--quick` (sizes 64, race at 32) well under one.
 """
 from __future__ import annotations
@@ -258,6 +259,8 @@ def main(argv=None):
     ap.add_argument("--spp", default="8,32,128")
     ap.add_argument("--reference-spp", type=int, default=512)
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
+    ap.add_argument("--record", action="store_true",
+                    help="also write benchmarks/measured/levels.json, which the docs' figures are rendered from")
     args = ap.parse_args(argv)
     if args.quick:
         args.sizes, args.race_size, args.spp, args.reference_spp = "64", 32, "2,8", 16
@@ -277,6 +280,9 @@ def main(argv=None):
     if args.race_size:
         data["race"] = race(bpy, args.race_size, [int(s) for s in args.spp.split(",")], args.reference_spp, log)
     (out / "levels.json").write_text(json.dumps(data, indent=2, allow_nan=False))
+    if args.record:
+        import measured
+        print(f"recorded {measured.record('levels', data)}")
     text = markdown(data)
     (out / "levels.md").write_text(text)
     print(text)

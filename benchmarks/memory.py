@@ -11,7 +11,8 @@ the square but a --gutter, 5 %: texels are then 0.81 of the pixels). Bytes per t
 out; the estimate's bytes per texel are taken the same way. A sampler thread also records which
 phase of the bake (rasterise, direct, clearance, rise, build, trace+estimate, images, denoise) held
 the peak, and the line the main thread was on. Prints a table, writes JSON
-(default benchmarks/results/memory.json). --directional and --shadowmask (the lamp's) bake those maps
+(default benchmarks/results/memory.json; with --record also benchmarks/measured/memory.json, from
+which the docs' figures are rendered: measured.py). --directional and --shadowmask (the lamp's) bake those maps
 too: their parts of the estimate count with the texels'.
 """
 from __future__ import annotations
@@ -173,6 +174,8 @@ def main(argv=None):
     ap.add_argument("--directional", default="none", choices=["none", "sh", "dominant"],
                     help="also bake directional maps (their estimate counts per texel)")
     ap.add_argument("--shadowmask", action="store_true", help="also bake the lamp's shadowmask")
+    ap.add_argument("--record", action="store_true",
+                    help="also write benchmarks/measured/memory.json, which the docs' figures are rendered from")
     ap.add_argument("--child", nargs=7, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
@@ -192,11 +195,15 @@ def main(argv=None):
               f"{row['peak_phase']}, {row['peak_at'][-1] if row['peak_at'] else '?'}", flush=True)
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"resolution": args.resolution, "photons": args.photons, "cores": os.cpu_count(),
-                               "denoise": not args.no_denoise, "gutter": args.gutter,
-                               "directional": args.directional, "shadowmask": args.shadowmask, "results": rows},
-                              indent=2, allow_nan=False))
+    data = {"resolution": args.resolution, "photons": args.photons, "cores": os.cpu_count(),
+            "denoise": not args.no_denoise, "gutter": args.gutter,
+            "directional": args.directional, "shadowmask": args.shadowmask, "results": rows}
+    out.write_text(json.dumps(data, indent=2, allow_nan=False))
     print(f"wrote {out}")
+    if args.record:
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+        import measured
+        print(f"recorded {measured.record('memory', data)}")
 
 
 if __name__ == "__main__":

@@ -197,6 +197,17 @@ OPTIONS = (
                      "the real light times the mask adds it at render time"),
                     ("overlay", "Overlay", "Its direct light stays in the lightmap too; the mask only says where its "
                      "shadows are (to darken dynamic objects' light there)"))),
+    Option("probes", str, "off", "Light Probes", "Also bake light probes for moving objects: SH L2 of the light "
+           "at points in space, written to probes.npz (docs/probes.md)",
+           choices=(("off", "Off", "No probes"),
+                    ("auto", "Automatic Grid", "A grid over the baked objects' bounds at Probe Spacing, probes kept "
+                     "within one spacing of a surface"),
+                    ("volumes", "Light Probe Volumes", "One grid per Light Probe Volume object of the scene, its box "
+                     "cut by its own resolution"))),
+    Option("probe_spacing", float, 1.0, "Probe Spacing", "Automatic probe grid: metres between probes",
+           minimum=0.01, soft_maximum=16.0, unit="LENGTH", metavar="METRES"),
+    Option("probe_rays", int, 512, "Probe Rays", "Gather rays per probe (its light from the lightmaps, emitters and "
+           "sky; lights by shadow rays apart): more is less noise", minimum=16, maximum=65536, soft_maximum=4096),
     Option("margin", int, 16, "Margin", "Pixels of dilation around the UV charts, against seams under filtering",
            minimum=0, maximum=MAX_MARGIN),
     Option("threads", int, 0, "Threads", "Threads for tracing and estimation (0: all cores)", minimum=0,

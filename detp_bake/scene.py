@@ -112,6 +112,15 @@ def check_light(light: "Light") -> None:
 
 
 @dataclass
+class ProbeVolume:
+    """A Light Probe Volume: probes at the cell centres of the unit cube [−1, 1]³ under `matrix`,
+    cut into `resolution` (x, y, z) cells (probes/placement.py)."""
+    name: str
+    matrix: np.ndarray  # 4x4 world matrix
+    resolution: tuple
+
+
+@dataclass
 class BakeObject:
     """A run of consecutive triangles that belongs to one object; `bake` objects get a lightmap."""
     name: str
@@ -156,6 +165,8 @@ class Scene:
     # What the exporter found (blender.export_scene): instance and triangle counts, bytes per
     # triangle, what it left out and why. Plain JSON-able values, for report.json.
     export_stats: dict = field(default_factory=dict)
+    # The scene's Light Probe Volumes (ProbeVolume), for a bake with probes = 'volumes'.
+    probe_volumes: list = field(default_factory=list)
 
     @property
     def triangle_count(self) -> int:

@@ -3,6 +3,7 @@ and a Blender scene exported for the core."""
 import bpy
 
 from ..detp_bake import blender, options
+from ..detp_bake.errors import BakeError
 from ..detp_bake.run import memory
 from ..detp_bake.lightmap import texels
 from ..detp_bake.run.bake import BakeSettings
@@ -113,3 +114,13 @@ def idle(cls, context) -> bool:
         cls.poll_message_set(busy)
         return False
     return context.scene is not None
+
+
+def apply_probes(scene, folder: str, log) -> int:
+    """Light the scene's objects marked Probe Light with the probes.npz in `folder`, if there is
+    one; how many objects."""
+    try:
+        return len(blender.apply_marked(scene, folder))
+    except BakeError as exc:
+        log(str(exc))
+        return 0

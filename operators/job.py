@@ -157,6 +157,7 @@ class BakeJob(BlenderJob):
             uv = common.uv_layers([scene.objects[n] for n in self.objects if n in scene.objects])
             blender.apply_all(scene, files, uv, self.settings.estimator,
                               log=lambda note: report({"WARNING"}, note))
+            common.apply_probes(scene, self.out_dir, lambda note: report({"WARNING"}, note))
         kept = (f"; {len(reused)} unchanged since the last bake, kept (Rebake All bakes them again)"
                 if reused else "")
         for warning in self.warnings:

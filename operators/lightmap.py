@@ -46,17 +46,22 @@ class DETPBAKE_OT_apply(bpy.types.Operator):
         objects = common.bake_targets(context)
         estimator = context.scene.detp_bake.estimator
         files = _files_for(context, objects, estimator)
-        if not files:
-            self.report({"ERROR"}, f"no {estimator} lightmaps in {common.output_directory(context)}: bake first")
+        out = common.output_directory(context)
+        if not files and not os.path.isfile(os.path.join(out, "probes.npz")):
+            self.report({"ERROR"}, f"no {estimator} lightmaps in {out}: bake first")
             return {"CANCELLED"}
         try:
-            blender.apply_all(context.scene, files, common.uv_layers(objects), estimator,
-                              log=lambda note: self.report({"WARNING"}, note))
+            if files:
+                blender.apply_all(context.scene, files, common.uv_layers(objects), estimator,
+                                  log=lambda note: self.report({"WARNING"}, note))
         except BakeError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
+        # after the lightmaps: a marked object that got one shows probe light instead
+        lit = common.apply_probes(context.scene, out, lambda note: self.report({"WARNING"}, note))
         missing = len(objects) - len(files)
-        self.report({"INFO"}, f"Applied {len(files)} lightmaps" + (f"; {missing} objects have none" if missing else ""))
+        self.report({"INFO"}, f"Applied {len(files)} lightmaps" + (f"; {missing} objects have none" if missing else "")
+                    + (f"; probe light on {lit} objects" if lit else ""))
         return {"FINISHED"}
 
 

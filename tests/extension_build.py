@@ -7,7 +7,7 @@ and tests/test_extension.py. Not part of the extension (the build excludes tests
 Every wheel comes from `pip download --only-binary=:all: --no-deps --platform ... --python-version
 ...` with the pins of requirements/blender-<line>.txt, and the result must be exactly the manifest's
 `wheels` list: a pin changed in requirements/ without the manifest (or the reverse) is an error
-that names the difference. numpy is Blender's own and is never bundled.
+that names the difference. numpy and OpenImageIO are Blender's own and are never bundled (BLENDER_PROVIDES).
 """
 import os
 import re
@@ -27,12 +27,18 @@ LINES = {"4.5": "3.11", "5.2": "3.13"}
 LINE_VERSIONS = {"4.5": ("4.5.0", "5.0.0"), "5.2": ("5.2.0", None)}
 
 # What the extension imports at run time besides Blender's own numpy (bpy is Blender itself).
-RUNTIME = ("embreex", "OpenImageIO", "numba", "llvmlite", "scipy", "xatlas", "pyoidn")
+RUNTIME = ("embreex", "OpenImageIO", "numba", "llvmlite", "xatlas", "pyoidn")
+# What Blender itself provides of these, on every line: Blender 4.5 and 5.2 install OpenImageIO's Python
+# module into their own Python (<version>/python/lib/python3.x/site-packages/OpenImageIO, on sys.path;
+# the bpy wheel keeps a copy of that folder: OIIO 3.0.19 for 4.5, 3.1.13 for 5.2), and it writes the
+# same bytes as the pinned wheel. Inside Blender the add-on imports Blender's; outside it, the wheel of
+# requirements/. The zips do not bundle it.
+BLENDER_PROVIDES = ("OpenImageIO",)
+BUNDLED = tuple(p for p in RUNTIME if p not in BLENDER_PROVIDES)
 
 # Blender platform -> pip --platform tags, most preferred first.
 # - linux-x64: Blender 4.5+ needs glibc 2.28, so manylinux_2_28 and older.
-# - macos-arm64: embreex 4.4 wheels need macOS 13 (numba/llvmlite 12, the rest 11), and scipy's
-#   macOS 14 (Accelerate) build must not be picked.
+# - macos-arm64: embreex 4.4 wheels need macOS 13 (numba/llvmlite 12, the rest 11).
 # - macos-x64 is left out: numba >= 0.63 and llvmlite >= 0.46 have no Intel-mac wheels (the last are
 #   numba 0.62.1 / llvmlite 0.45.1), and Blender 5.x has no Intel-mac build at all.
 PLATFORM_TAGS = {
@@ -85,7 +91,7 @@ def manifest_wheels(python: str | None = None, platform: str | None = None) -> l
 
 
 def pins(line: str) -> list[str]:
-    """`name==version` of every runtime package in requirements/blender-<line>.txt."""
+    """`name==version` of every bundled runtime package (BUNDLED) in requirements/blender-<line>.txt."""
     found = {}
     for raw in (ROOT / "requirements" / f"blender-{line}.txt").read_text().splitlines():
         req = raw.split("#")[0].strip()
@@ -95,7 +101,7 @@ def pins(line: str) -> list[str]:
     missing = [p for p in RUNTIME if p.lower() not in found]
     if missing:
         raise SystemExit(f"requirements/blender-{line}.txt pins none of {missing}")
-    return [found[p.lower()] for p in RUNTIME]
+    return [found[p.lower()] for p in BUNDLED]
 
 
 def download(dest: Path, python: str, platform: str, quiet: bool = True) -> None:
@@ -141,6 +147,38 @@ def download_cached(cache: Path, python: str, platform: str) -> list[Path]:
         download(cache, python, platform)
     check(cache, expected, exact=False)
     return [cache / Path(w).name for w in expected]
+
+
+# pyoidn's Linux wheel carries OIDN's GPU devices (SYCL, HIP, CUDA and the SYCL runtime: libsycl,
+# libur_*, libumf), its command-line tools and CMake files beside the CPU device, and each library
+# three times over (a zip holds no symlinks). The add-on runs OIDN on the CPU only (lightmap/denoise.py),
+# so its zip gets the wheel with just what pyoidn loads: the library it opens, the core (with the
+# networks' weights), the CPU device, which OIDN's core finds beside itself, and TBB by its soname.
+# The Windows and macOS wheels are bundled as published: nothing here can load them to check a cut.
+CPU_ONLY = {"linux-x64": re.compile(r"pyoidn/oidn/lib/lib(OpenImageDenoise\.so|OpenImageDenoise_core\.so\.[\d.]+"
+                                    r"|OpenImageDenoise_device_cpu\.so\.[\d.]+|tbb\.so\.12)")}
+
+
+def cpu_only_wheel(wheel: Path, dest: Path, platform: str) -> Path:
+    """`wheel` as dest/<same name>, without pyoidn's files that the CPU device never loads (CPU_ONLY),
+    its RECORD listing exactly what is left. Any other wheel, or platform, is returned as it is."""
+    import zipfile
+    if not wheel.name.startswith("pyoidn-") or platform not in CPU_ONLY:
+        return wheel
+
+    def keep(name: str) -> bool:
+        return not name.startswith("pyoidn/oidn/") or bool(CPU_ONLY[platform].fullmatch(name))
+
+    dest.mkdir(parents=True, exist_ok=True)
+    out = dest / wheel.name
+    with zipfile.ZipFile(wheel) as src, zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as dst:
+        record = next(n for n in src.namelist() if n.endswith(".dist-info/RECORD"))
+        for info in src.infolist():
+            if keep(info.filename) and info.filename != record:
+                dst.writestr(info, src.read(info))  # the entry's date and mode bits kept
+        lines = [r for r in src.read(record).decode().splitlines() if r and keep(r.split(",")[0])]
+        dst.writestr(src.getinfo(record), "\n".join(lines) + "\n")
+    return out
 
 
 def blender_ext_script(bpy_version_dir: Path) -> Path:
@@ -197,24 +235,58 @@ def build_zip(dist: Path, blender_ext: Path, cache: Path, line: str, platform: s
     """The zip users get for one Blender line and platform, with that line's wheels only:
     dist/<id>-<version>-blender<line>-<platform>.zip (`make extension` and tests/test_extension.py)."""
     import tempfile
-    wheels = download_cached(cache, LINES[line], platform)
     dist.mkdir(parents=True, exist_ok=True)
     out = dist / zip_name(line, platform)
     with tempfile.TemporaryDirectory() as tmp:
+        wheels = [cpu_only_wheel(w, Path(tmp) / "cpu-only", platform)
+                  for w in download_cached(cache, LINES[line], platform)]
         src = stage_source(Path(tmp) / "src", wheels, platform, line)
         subprocess.run([sys.executable, str(blender_ext), "build", "--source-dir", str(src),
                         "--output-filepath", str(out)], check=True, stdout=subprocess.DEVNULL)
     return out
 
 
+def megabytes(size: int) -> str:
+    """A zip's size as README's table writes it."""
+    return f"{size / 1e6:.0f} MB"
+
+
+def size_table(sizes: dict) -> list[str]:
+    """README's table of zip sizes (Markdown rows) from {(line, platform): bytes}."""
+    platforms = manifest()["platforms"]
+    rows = ["| Blender line | " + " | ".join(platforms) + " |", "|---" * (len(platforms) + 1) + "|"]
+    for line in LINES:
+        rows.append(f"| {line} | " + " | ".join(megabytes(sizes[line, p]) for p in platforms) + " |")
+    return rows
+
+
+def readme_sizes(text: str) -> dict:
+    """{(line, platform): 'N MB'} from README's table of zip sizes (size_table's form)."""
+    platforms = manifest()["platforms"]
+    head = "| Blender line | " + " | ".join(platforms) + " |"
+    lines = text.splitlines()
+    if head not in lines:
+        raise ValueError(f"README.md has no table of zip sizes headed {head!r}")
+    found = {}
+    for row in lines[lines.index(head) + 2:]:
+        cells = [c.strip() for c in row.strip().strip("|").split("|")]
+        if not row.startswith("|") or cells[0] not in LINES:
+            break
+        found.update({(cells[0], p): c for p, c in zip(platforms, cells[1:])})
+    return found
+
+
 def build_zips(dist: Path, blender_ext: Path, cache: Path) -> list[tuple[Path, int]]:
-    """Every line's and platform's zip (build_zip). Returns [(zip, bytes)]."""
-    built = []
+    """Every line's and platform's zip (build_zip), then README's table of their sizes. Returns
+    [(zip, bytes)]."""
+    built, sizes = [], {}
     for line in LINES:
         for platform in manifest()["platforms"]:
             out = build_zip(dist, blender_ext, cache, line, platform)
             built.append((out, out.stat().st_size))
-            print(f"{out.name}: {out.stat().st_size / 1e6:.0f} MB", flush=True)
+            sizes[line, platform] = out.stat().st_size
+            print(f"{out.name}: {out.stat().st_size} bytes", flush=True)
+    print("\nREADME.md, zip sizes:\n" + "\n".join(size_table(sizes)), flush=True)
     return built
 
 

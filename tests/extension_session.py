@@ -3,8 +3,9 @@ SCENE OUT RESULT_JSON` in a fresh process: installs the extension zip into the b
 bakes the scene through `bpy.ops.detp_bake.bake()`, disables and uninstalls the extension, and
 writes what it saw to RESULT_JSON (the test judges it).
 
-SITE is a site-packages folder holding bpy and what Blender itself bundles, but none of the
-extension's runtime wheels: those can only come from the zip, as in a real Blender.
+SITE is a site-packages folder holding bpy and what Blender itself bundles (its own Python's
+site-packages, OpenImageIO among them), but none of the extension's runtime wheels: those can only
+come from the zip, as in a real Blender.
 """
 import glob
 import importlib
@@ -16,7 +17,8 @@ import sys
 import time
 import traceback
 
-RUNTIME = ("embreex", "OpenImageIO", "numba", "llvmlite", "scipy", "xatlas", "pyoidn")  # as extension_build.RUNTIME
+RUNTIME = ("embreex", "OpenImageIO", "numba", "llvmlite", "xatlas", "pyoidn")  # as extension_build.RUNTIME
+BLENDER_PROVIDES = ("OpenImageIO",)  # as extension_build.BLENDER_PROVIDES: Blender's own, not in the zip
 REPO = "user_default"
 PKG = "detp_bake"
 MODULE = f"bl_ext.{REPO}.{PKG}"
@@ -40,7 +42,9 @@ def files_under(root):
 def main(site_dir, zip_path, scene_path, out_dir, result_path):
     sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != os.path.dirname(os.path.abspath(__file__))]
     site.addsitedir(site_dir)
-    r = {"preinstalled": [n for n in RUNTIME if importlib.util.find_spec(n) is not None], "seconds": {}}
+    r = {"preinstalled": [n for n in RUNTIME if n not in BLENDER_PROVIDES and importlib.util.find_spec(n) is not None],
+         "blender_provides": {n: getattr(importlib.util.find_spec(n), "origin", None) for n in BLENDER_PROVIDES},
+         "seconds": {}}
     clock = [time.perf_counter()]
 
     def lap(name):

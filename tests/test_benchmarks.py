@@ -123,3 +123,22 @@ def test_levels_benchmark(tmp_path):
     assert methods[0].startswith("ours") and methods[-1] == "Cycles 8 spp + OIDN"
     assert all(0 < r["error"] < 2 and r["seconds"] > 0 for r in data["race"]["rows"])
     assert "Race at 32²" in text
+
+
+def test_the_docs_measured_figures_are_the_recorded_ones():
+    """Every `<!-- measured … -->` block in README.md and docs/ is its rendering of
+    benchmarks/measured/*.json (measured.py): a figure typed by hand, or a benchmark recorded
+    without `measured.py --write`, fails here; and each renderer is used by some doc."""
+    sys.path.insert(0, str(BENCH))
+    import measured
+    used = set()
+    for path in measured.DOCS:
+        for name, indent, body in measured.blocks(path.read_text()):
+            used.add(name)
+            assert body == measured.rendered(name, indent), \
+                f"{path.name}: block '{name}' is not what benchmarks/measured/ holds (python benchmarks/measured.py --write)"
+    assert used == set(measured.BLOCKS)
+    # A block holds the figures: one changed in the record changes the text.
+    data = measured.load("levels")
+    data["phases"][0]["seconds"]["trace"] += 1.0
+    assert measured.BLOCKS["levels.phases"][1](data) != measured.render("levels.phases")

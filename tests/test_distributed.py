@@ -36,9 +36,9 @@ def _sphere():
                       [PointLight("Lamp", np.zeros(3), np.full(3, 100.0))], resolution=32)
 
 
-def _settings(name, photons=200_000):
+def _settings(name, photons=200_000, **kw):
     return BakeSettings(estimator=name, photons=photons, bounces=3, batch_size=20_000, denoise=False,
-                        estimator_settings=EstimatorSettings(radius=0.1))
+                        estimator_settings=EstimatorSettings(radius=0.1), **kw)
 
 
 def _same(a, b):
@@ -62,9 +62,14 @@ def test_a_local_bake_imports_no_dask():
 @pytest.mark.parametrize("name", ["disc_index", "sphere_cache", "photon_map"])
 def test_two_workers_bake_exactly_what_one_process_bakes(cluster, name):
     sc = _sphere()
-    local = compute(sc, _settings(name))
-    far = compute(sc, _settings(name), cluster=cluster)
+    # Light probes (disc_index's case): gathered here from the lightmaps the cluster's photons made.
+    probes = {"probes": "auto", "probe_spacing": 0.5, "probe_rays": 32} if name == "disc_index" else {}
+    local = compute(sc, _settings(name, **probes))
+    far = compute(sc, _settings(name, **probes), cluster=cluster)
     _same(local, far)
+    assert len(local.probes) == len(far.probes) == (1 if probes else 0)
+    for a, b in zip(local.probes, far.probes):
+        assert len(a) > 0 and np.array_equal(a.coefficients, b.coefficients)
     assert far.cluster["workers"] == 2 and far.cluster["units"] >= 3 and far.cluster["resubmitted"] == 0
     assert "cluster" in far.report() and "cluster" not in local.report()
 

@@ -6,7 +6,9 @@ installs it, bakes the Cornell box through `bpy.ops.detp_bake.bake()`, then disa
 The wheels are downloaded once into .cache/extension-wheels/ (pip runs only when one is missing).
 """
 import importlib.metadata
+import io
 import json
+import re
 import os
 import platform
 import subprocess
@@ -89,12 +91,61 @@ def test_zip_holds_the_add_on_and_this_pythons_wheels_only(bpy, built_zip):
         assert name.split("/")[0] in set(eb.SHIPPED) | {"wheels"}, name
         assert "node_modules" not in name and "__pycache__" not in name, name
         assert not name.endswith((".pyc", ".nbi", ".nbc", ".blend", ".glb", ".exr")), name
+    assert not [n for n in names if n.lower().startswith(tuple(f"wheels/{p.lower()}-" for p in eb.BLENDER_PROVIDES))]
+    if HOST in eb.CPU_ONLY:  # pyoidn's wheel with the CPU device only, no GPU device or runtime
+        wheel = next(n for n in names if n.startswith("wheels/pyoidn-"))
+        inner = zipfile.ZipFile(io.BytesIO(zipfile.ZipFile(built_zip).read(wheel))).namelist()
+        libs = [Path(n).name for n in inner if n.startswith("pyoidn/oidn/")]
+        assert len(libs) == 4 and sum("_device_" in n for n in libs) == 1, libs
+        assert any(n.startswith("libOpenImageDenoise_device_cpu.so") for n in libs), libs
+        assert not [n for n in libs if re.search(r"cuda|hip|sycl|ur_|umf", n)], libs
     proc = _run(_blender_ext(bpy), "validate", built_zip)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     # One Blender line's zip: it says which Blender versions its wheels serve.
     manifest = tomllib.loads(zipfile.ZipFile(built_zip).read("blender_manifest.toml").decode())
     low, high = eb.LINE_VERSIONS[LINE]
     assert manifest["blender_version_min"] == low and manifest.get("blender_version_max") == high
+
+
+def test_readme_gives_a_size_for_every_line_and_platform():
+    sizes = eb.readme_sizes((ROOT / "README.md").read_text())
+    assert set(sizes) == {(line, p) for line in eb.LINES for p in eb.manifest()["platforms"]}
+    assert all(re.fullmatch(r"\d+ MB", s) for s in sizes.values()), sizes
+
+
+def test_readme_size_is_the_size_of_the_zip_users_get(bpy, built_zip):
+    """README's figure for this line and machine is the built zip's (make extension prints them all)."""
+    size = eb.readme_sizes((ROOT / "README.md").read_text())[LINE, HOST]
+    assert size == eb.megabytes(built_zip.stat().st_size), \
+        f"README.md says {size} for Blender {LINE} on {HOST}; the zip is {built_zip.stat().st_size} bytes " \
+        "(make extension prints README's table)"
+
+
+def test_cpu_only_wheel_keeps_what_pyoidn_loads_and_lists_it(tmp_path):
+    """A made-up pyoidn wheel: the cut keeps the Python files, the four CPU libraries, and a RECORD of
+    exactly what is left; another platform's wheel, or another package, is left as it is."""
+    src = tmp_path / "pyoidn-9.9-py3-none-manylinux2014_x86_64.whl"
+    names = ["pyoidn/__init__.py", "pyoidn/oidn/bin/oidnTest", "pyoidn/oidn/lib/libOpenImageDenoise.so",
+             "pyoidn/oidn/lib/libOpenImageDenoise.so.2", "pyoidn/oidn/lib/libOpenImageDenoise_core.so.2.5.1",
+             "pyoidn/oidn/lib/libOpenImageDenoise_device_cpu.so.2.5.1",
+             "pyoidn/oidn/lib/libOpenImageDenoise_device_cuda.so.2.5.1", "pyoidn/oidn/lib/libsycl.so.9",
+             "pyoidn/oidn/lib/libtbb.so.12", "pyoidn/oidn/lib/libtbb.so", "pyoidn-9.9.dist-info/METADATA"]
+    with zipfile.ZipFile(src, "w") as z:
+        for n in names:
+            z.writestr(n, n)
+        z.writestr("pyoidn-9.9.dist-info/RECORD", "".join(f"{n},sha256=x,{len(n)}\n" for n in names) +
+                   "pyoidn-9.9.dist-info/RECORD,,\n")
+    out = eb.cpu_only_wheel(src, tmp_path / "cut", "linux-x64")
+    kept = {"pyoidn/__init__.py", "pyoidn/oidn/lib/libOpenImageDenoise.so",
+            "pyoidn/oidn/lib/libOpenImageDenoise_core.so.2.5.1",
+            "pyoidn/oidn/lib/libOpenImageDenoise_device_cpu.so.2.5.1", "pyoidn/oidn/lib/libtbb.so.12",
+            "pyoidn-9.9.dist-info/METADATA"}
+    with zipfile.ZipFile(out) as z:
+        assert set(z.namelist()) == kept | {"pyoidn-9.9.dist-info/RECORD"}
+        assert all(z.read(n) == n.encode() for n in kept)
+        record = {r.split(",")[0] for r in z.read("pyoidn-9.9.dist-info/RECORD").decode().splitlines()}
+    assert record == kept | {"pyoidn-9.9.dist-info/RECORD"}
+    assert eb.cpu_only_wheel(src, tmp_path / "cut2", "windows-x64") == src
 
 
 def test_a_checkouts_build_output_stays_out_of_the_zip(tmp_path, monkeypatch):
@@ -111,8 +162,17 @@ def test_a_checkouts_build_output_stays_out_of_the_zip(tmp_path, monkeypatch):
     assert staged - {"blender_manifest.toml"} == {f for f in eb.shipped_files() if f != "blender_manifest.toml"}
 
 
+def _blender_own_site(bpy) -> Path:
+    """Blender's own Python's site-packages, which a real Blender has on sys.path (OpenImageIO,
+    PyOpenColorIO, MaterialX, pxr...): the bpy wheel keeps a copy of it, off sys.path."""
+    path = _bpy_version_dir(bpy) / "python" / "lib" / f"python{PY}" / "site-packages"
+    assert path.is_dir(), f"the bpy wheel has no copy of Blender's own site-packages: {path}"
+    return path
+
+
 def _blender_like_site(bpy, dst: Path) -> Path:
-    """The test environment's site-packages without the extension's runtime wheels, as links."""
+    """The test environment's site-packages without the extension's runtime wheels, as links, and
+    Blender's own site-packages on the path, as in a real Blender."""
     site_packages = _bpy_version_dir(bpy).parent.parent
     hidden = {f.parts[0] for name in eb.RUNTIME for f in importlib.metadata.distribution(name).files
               if f.parts[0] != ".."}
@@ -120,6 +180,7 @@ def _blender_like_site(bpy, dst: Path) -> Path:
     for entry in site_packages.iterdir():
         if entry.name not in hidden and entry.suffix != ".pth":
             (dst / entry.name).symlink_to(entry, target_is_directory=entry.is_dir())
+    (dst / "blender_own_python.pth").write_text(f"{_blender_own_site(bpy)}\n")
     return dst
 
 
@@ -136,7 +197,9 @@ def test_install_bake_disable_uninstall(bpy, built_zip, tmp_path):
     assert proc.returncode == 0 and result.exists(), log
     r = json.loads(result.read_text())
     assert "error" not in r, r.get("error", "") + log
-    assert r["preinstalled"] == [], "the Blender session must see the runtime wheels only through the zip"
+    assert r["preinstalled"] == [], "the Blender session must see the bundled wheels only through the zip"
+    own = str(_blender_own_site(bpy))
+    assert all(str(origin).startswith(own) for origin in r["blender_provides"].values()), r["blender_provides"]
 
     assert r["install"] == ["FINISHED"] and r["installed_dir"], log
     state = r["after_install"]
@@ -146,8 +209,9 @@ def test_install_bake_disable_uninstall(bpy, built_zip, tmp_path):
     assert r["bake"] == ["FINISHED"], log
     assert r["exr"] and all(n.endswith(".exr") and (out / n).stat().st_size > 0 for n in r["exr"]), r["exr"]
     assert {"embreex", "numba", "llvmlite", "OpenImageIO", "pyoidn"} <= set(r["imported_by_bake"]), log
-    for name, path in r["module_files"].items():  # from the bundled wheels, nowhere else
-        assert any(path.startswith(sp) for sp in r["wheel_site_packages"]), (name, path)
+    for name, path in r["module_files"].items():  # from the bundled wheels, or Blender's own Python
+        where = [own] if name in eb.BLENDER_PROVIDES else r["wheel_site_packages"]
+        assert any(path.startswith(sp) for sp in where), (name, path)
     # numba's cache: the extension's user folder, one subfolder per state of the core's sources.
     assert Path(r["numba_cache_dir"]).parent == Path(r["numba_user_path"]), r["numba_cache_dir"]
     assert len(Path(r["numba_cache_dir"]).name) == 12
@@ -164,4 +228,4 @@ def test_install_bake_disable_uninstall(bpy, built_zip, tmp_path):
             if not f.startswith((r["extension_user_dir"] + os.sep, os.path.join("extensions", ".cache") + os.sep))]
     assert not left, (r["extension_user_dir"], left)
     assert not [n for n in r["left_wheels"] if n.split("-")[0].split(".")[0].lower() in
-                {p.lower() for p in eb.RUNTIME}], r["left_wheels"]
+                {p.lower() for p in eb.BUNDLED}], r["left_wheels"]

@@ -131,9 +131,52 @@ def test_a_region_made_only_of_fragments_is_left_to_them():
     assert out[:, :8].std() < 0.5 * img[:, :8].std()  # the other region went through OIDN
 
 
+def test_the_texels_geometry_is_set_aside_once_and_nothing_after_tracing_reads_it(monkeypatch):
+    """The denoiser's regions and fragments are found before tracing (finishing.plan), so the
+    texels' positions and normals leave once, when tracing starts, and come back once, after the
+    last image: absent while OIDN runs, found again bit for bit."""
+    from detp_bake.lightmap import denoise, texels as texels_mod
+    from detp_bake.scene import SunLight
+    from synthetic import sealed_room
+
+    towards = np.array([-0.3, 0.4, -0.87]) / np.linalg.norm([-0.3, 0.4, -0.87])
+    scene = sealed_room([SunLight("Sun", towards, np.full(3, 3.0))], world=(0.3, 0.4, 0.6), resolution=32,
+                        ground_mesh=shuffled_charts(16.0, 8))
+    seen = {"set aside": 0, "found": 0, "denoised with geometry": 0, "denoised": 0}
+    real_aside, real_points, real_denoise = \
+        texels_mod.geometry_set_aside, texels_mod.surface_points, denoise.denoise_lightmap
+    current = {}
+
+    def aside(texels, sc):
+        seen["set aside"] += 1
+        current["texels"] = texels
+        return real_aside(texels, sc)
+
+    def points(texels, sc):
+        seen["found"] += 1
+        return real_points(texels, sc)
+
+    def denoised(*args, **kwargs):
+        seen["denoised"] += 1
+        seen["denoised with geometry"] += current["texels"].position is not None
+        return real_denoise(*args, **kwargs)
+    monkeypatch.setattr(texels_mod, "geometry_set_aside", aside)
+    monkeypatch.setattr(texels_mod, "surface_points", points)
+    monkeypatch.setattr(denoise, "denoise_lightmap", denoised)
+    r = compute(scene, BakeSettings(photons=200_000))
+    expected = texels_mod.rasterise(scene.recentred()[0])
+    assert r.counters["fragment_texels"] > 0 and r.texels.cuts.of.max() >= 0
+    assert seen == {"set aside": 1, "found": 1, "denoised with geometry": 0, "denoised": seen["denoised"]}, seen
+    assert seen["denoised"] >= 2
+    moved = r.texels.cuts.moved
+    np.testing.assert_array_equal(r.texels.normal, expected.normal)
+    np.testing.assert_allclose(r.texels.position[~moved] - scene.recentred()[1], expected.position[~moved],
+                               rtol=0, atol=1e-9)
+
+
 def _starved_plane(mesh, seed, passes):
-    """A plane's texel histogram from 40,000 photons (10 a texel: its measured noise far over
-    fragments.STARVED), fragments taking at most `passes` means: error per texel against the
+    """A plane's texel histogram from 40,000 photons (10 a texel: its measured noise asks for 4
+    passes, fragments.passes_for), fragments taking at most `passes` means: error per texel against the
     analytic irradiance, the mean's, and the fragment texels' count."""
     from detp_bake.lightmap import fragments
 
@@ -145,7 +188,7 @@ def _starved_plane(mesh, seed, passes):
         r = compute(scene, BakeSettings(photons=40_000, batch_size=5_000, direct="photons", seed=seed))
     finally:
         fragments.MAX_PASSES = kept
-    assert r.noise["Plane"] > fragments.STARVED
+    assert fragments.passes_for(r.noise["Plane"]) >= 4
     img = r.images["Plane"].reshape(-1, 3)[r.texels.pixel].mean(axis=1)
     x = r.texels.position
     expected = POWER / (4 * np.pi) * H / (H * H + x[:, 0] ** 2 + x[:, 1] ** 2) ** 1.5 / np.pi
@@ -158,7 +201,7 @@ def test_a_starved_fragmented_lightmap_takes_more_passes():
     """Few photons a texel on the plane of 4-texel charts: the fragments take as many means in
     turn as the measured noise asks (fragments.passes_for), each widening the kernel along the
     surface: 10.5 % per texel against 18.7 % with one mean (2 seeds), the mean within 2 %. The same
-    plane as one 64-texel chart stays OIDN's (7.9 %): wider than STARVED_WIDTH."""
+    plane as one 64-texel chart stays OIDN's (7.9 %)."""
     more, one = [], []
     for seed in range(2):
         err, mean, count = _starved_plane(_charts(), seed, 32)

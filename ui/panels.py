@@ -33,6 +33,7 @@ class DETPBAKE_PT_main(_Panel, bpy.types.Panel):
         row.operator("detp_bake.apply", icon="MATERIAL")
         row.operator("detp_bake.revert", icon="LOOP_BACK")
         layout.operator("detp_bake.open_image", icon="IMAGE_DATA")
+        layout.prop(s, "show_probes", icon="LIGHTPROBE_VOLUME" if bpy.app.version >= (4, 1, 0) else "LIGHTPROBE_GRID")
         layout.operator("detp_bake.export_gltf", icon="EXPORT")
 
     @staticmethod
@@ -153,6 +154,7 @@ class DETPBAKE_PT_lightmaps(_Panel, bpy.types.Panel):
         row = layout.row()
         row.active = any(light.detp_bake.shadowmask for light in lights)
         row.prop(s, "shadowmask_mode")
+        _draw_probes(layout, context, s)
         layout.prop(s, "output_directory")
         layout.prop(s, "formats")
         layout.prop(s, "apply_after_bake")
@@ -160,6 +162,21 @@ class DETPBAKE_PT_lightmaps(_Panel, bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("detp_bake.unwrap", text="Unwrap: Lightmap Pack").method = "LIGHTMAP_PACK"
         row.operator("detp_bake.unwrap", text="xatlas").method = "XATLAS"
+
+
+def _draw_probes(layout, context, s) -> None:
+    """Light probes: the mode, its settings, and the count and memory before baking."""
+    layout.prop(s, "probes")
+    row = layout.row()
+    row.active = s.probes == "auto"
+    row.prop(s, "probe_spacing")
+    row = layout.row()
+    row.active = s.probes != "off"
+    row.prop(s, "probe_rays")
+    if s.probes != "off":
+        from ..detp_bake.blender.probe_volumes import panel_cost
+        count, size, exact = panel_cost(context.scene, context.view_layer, s.probes, s.probe_spacing)
+        layout.label(text=f"{'' if exact else 'At most '}{count:,} probes, {size / 1e6:.1f} MB")
 
 
 class DETPBAKE_PT_object(_Panel, bpy.types.Panel):
@@ -189,6 +206,7 @@ class DETPBAKE_PT_object(_Panel, bpy.types.Panel):
         layout.prop(o, "include")
         layout.prop(o, "density_scale" if context.scene.detp_bake.lightmaps == "atlas" else "resolution")
         layout.prop(o, "uv_layer")
+        layout.prop(o, "probe_light")
         if context.scene.detp_bake.use_frame_range:
             layout.prop(o, "motion")
 

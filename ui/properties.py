@@ -65,6 +65,9 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
     directional: _option("directional")
     # The shadowmask's lights: a toggle on each light object (DETPBakeObjectSettings.shadowmask)
     shadowmask_mode: _option("shadowmask_mode")
+    probes: _option("probes")
+    probe_spacing: _option("probe_spacing")
+    probe_rays: _option("probe_rays")
     output_directory: StringProperty(name="Output", default="//lightmaps/", subtype="DIR_PATH",
                                      description="Folder for the lightmap files (// is the .blend's folder)")
     formats: EnumProperty(name="Formats", options={"ENUM_FLAG"}, default={f.upper() for f in bake.BakeSettings.formats},
@@ -94,8 +97,16 @@ class DETPBakeSettings(bpy.types.PropertyGroup):
     frame_end: IntProperty(name="End", default=24, description="Last frame to bake")
     frame_step: IntProperty(name="Step", default=1, min=1, description="Bake every n-th frame of the range")
     hybrid_moving: _option("hybrid_moving")
+    show_probes: BoolProperty(name="Show Probes", default=False, update=lambda self, context: _show_probes(self),
+                              description="Draw the baked light probes of the output folder (probes.npz) in the "
+                                          "viewport as small spheres shaded by their light; invalid probes in red")
     last_report: StringProperty(name="Last Bake", default="", options={"HIDDEN"},
                                 description="Statistics of the last bake (JSON)")
+
+
+def _show_probes(settings) -> None:
+    from ..detp_bake.blender import probe_view
+    probe_view.show(settings.show_probes)
 
 
 class DETPBakeObjectSettings(bpy.types.PropertyGroup):
@@ -110,6 +121,9 @@ class DETPBakeObjectSettings(bpy.types.PropertyGroup):
                                          f"(up to {options.MAX_SHADOWMASK} lights, in name order)")
     uv_layer: StringProperty(name="Lightmap UV", default=options.UV_LAYER,
                              description="UV layer that holds this object's lightmap charts")
+    probe_light: BoolProperty(name="Probe Light", default=False,
+                              description="A moving object: Apply lights it with the baked light probes at its "
+                                          "position (updated as frames change) instead of a lightmap")
     motion: EnumProperty(name="Motion", default="AUTO",
                          items=[("AUTO", "Auto", "Moving when its evaluated geometry, placement or material "
                                  "changes over the frame range"),
@@ -130,6 +144,8 @@ def register():
 
 
 def unregister():
+    from ..detp_bake.blender import probe_view
+    probe_view.show(False)
     del bpy.types.Object.detp_bake
     del bpy.types.Scene.detp_bake
     for cls in reversed(classes):

@@ -1,6 +1,8 @@
 // detp_bake's lightmap viewer: a .glb lit only by its MOZ_lightmap textures.
 //   index.html?model=URL   load a model (relative URLs resolve against this page)
 //   &exposure=EV           scale the lightmaps by 2^EV, as Blender's Exposure (Color Management)
+//   &roll=P                move the probe-lit objects (DETP_light_probes) along the probe grid's x
+//                          extent, rolling: P in [0, 1] a fixed place, 'auto' back and forth
 //   &shot=1                for tests: no panel, and window.viewerReady = true once a frame of the
 //                          loaded model is on screen; window.viewerErrors holds what went wrong
 //                          and window.viewerInfo what was shown
@@ -8,10 +10,12 @@ import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { MozLightmap } from './moz_lightmap.js';
+import { DetpProbes, rollRange, updateProbeLit } from './detp_probes.js';
 
 const params = new URLSearchParams(location.search);
 const shot = params.has('shot') && params.get('shot') !== '0';
 const exposure = Number(params.get('exposure') ?? 0) || 0;
+const roll = params.get('roll');
 const status = document.getElementById('status');
 const canvas = document.getElementById('view');
 
@@ -42,9 +46,11 @@ let cameraAspect = null; // the glTF camera's aspectRatio, when it has one
 let baseFov = 50;
 const controls = new OrbitControls(camera, canvas);
 let model = null;
+let probes = null; // DETP_light_probes: { grids, lit } and where each lit node started
 
 const loader = new GLTFLoader();
 loader.register((parser) => new MozLightmap(parser));
+loader.register((parser) => new DetpProbes(parser));
 
 function say(text) { status.textContent = text; }
 
@@ -116,8 +122,17 @@ function show(gltf, name) {
       scaled.add(m);
     }
   });
-  window.viewerInfo = { model: name, lightmapped, sh, normalMapped, camera: gltf.cameras.length ? 'gltf' : 'framed' };
-  say(`${name}: ${lightmapped} lightmapped mesh${lightmapped === 1 ? '' : 'es'}${sh ? `, ${sh} with SH L1` : ''}`);
+  probes = gltf.userData.probes ?? null;
+  if (probes) {
+    probes.start = probes.lit.map((node) => ({ position: node.position.clone(), rotation: node.rotation.z,
+      radius: new THREE.Box3().setFromObject(node).getBoundingSphere(new THREE.Sphere()).radius || 1 }));
+  }
+  moveProbeLit(0);
+  const probeLit = probes ? probes.lit.length : 0;
+  window.viewerInfo = { model: name, lightmapped, sh, normalMapped, probeLit,
+                        probeGrids: probes ? probes.grids.length : 0, camera: gltf.cameras.length ? 'gltf' : 'framed' };
+  say(`${name}: ${lightmapped} lightmapped mesh${lightmapped === 1 ? '' : 'es'}${sh ? `, ${sh} with SH L1` : ''}` +
+      `${probeLit ? `, ${probeLit} lit by light probes` : ''}`);
   if (shot) {
     // Two frames: the first compiles and draws, the second is certainly on screen.
     let frames = 0;
@@ -129,6 +144,21 @@ function show(gltf, name) {
     };
     requestAnimationFrame(wait);
   }
+}
+
+// Roll the probe-lit nodes along the grid (the roll parameter), then aim their probe light.
+function moveProbeLit(seconds) {
+  if (!probes) return;
+  if (roll !== null && probes.lit.length) {
+    const phase = roll === 'auto' ? 1 - Math.abs(((seconds / 6) % 2) - 1) : Math.min(Math.max(Number(roll) || 0, 0), 1);
+    const [low, high] = rollRange(probes);
+    probes.lit.forEach((node, i) => {
+      const start = probes.start[i];
+      node.position.x = low + phase * (high - low);
+      node.rotation.z = start.rotation - (node.position.x - start.position.x) / start.radius;
+    });
+  }
+  updateProbeLit(probes, 2 ** exposure);
 }
 
 function failed(name, error) {
@@ -162,8 +192,9 @@ addEventListener('drop', (e) => {
 addEventListener('resize', resize);
 
 resize();
-renderer.setAnimationLoop(() => {
+renderer.setAnimationLoop((time) => {
   controls.update();
+  moveProbeLit(time / 1000);
   renderer.render(scene, camera);
 });
 

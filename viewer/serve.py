@@ -3,7 +3,7 @@ and nothing else (not the repository: its .git/config, the user's scenes and bak
 
     python viewer/serve.py [--port 8000] [--model scene.glb]
 
-URLs: /viewer/index.html, main.js and moz_lightmap.js; /viewer/node_modules/three/build/ and
+URLs: /viewer/index.html, main.js, moz_lightmap.js and detp_probes.js; /viewer/node_modules/three/build/ and
 /viewer/node_modules/three/examples/jsm/ (the page's import map); /model/<name of the .glb>.
 Anything else is 404, a folder included (no listings)."""
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
 VIEWER = Path(__file__).resolve().parent
-PAGE_FILES = ("index.html", "main.js", "moz_lightmap.js")
+PAGE_FILES = ("index.html", "main.js", "moz_lightmap.js", "detp_probes.js")
 THREE_FOLDERS = ("build", "examples/jsm")
 
 

@@ -8,6 +8,7 @@ from ..options import UV_LAYER
 
 FRAME_NAME = "detp_bake lightmap"
 REVERT_KEY = "detp_bake_revert"
+PROBE_PROPERTY = "detp_probe_sh"  # an object's probe SH, one colour per coefficient: detp_probe_sh0 … 8
 DEFAULT_UV = UV_LAYER
 DEFAULT_ALBEDO = (0.8, 0.8, 0.8)
 
@@ -37,3 +38,14 @@ def _surface_shader(mat):
         if surf is not None and surf.is_linked:
             return surf.links[0].from_node
     return None
+
+
+def probe_lit(obj) -> bool:
+    """The object's Probe Light toggle: it moves, so the baked probes light it, and the bake leaves
+    it out (no lightmap, no shadow or bounce at wherever it stands now). The add-on's object
+    setting, read from the stored settings where the add-on is not registered (the command line)."""
+    settings = getattr(obj, "detp_bake", None)
+    if settings is not None and hasattr(settings, "probe_light"):
+        return bool(settings.probe_light)
+    stored = obj.get("detp_bake")
+    return bool(stored is not None and hasattr(stored, "get") and stored.get("probe_light"))

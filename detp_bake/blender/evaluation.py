@@ -16,6 +16,7 @@ import bpy
 import numpy as np
 
 from ..errors import BakeError
+from .common import probe_lit
 from .materials import SlotRows, TextureTable, corner_colours, corner_uvs, render_uv_name
 from ..scene import MAX_POWER, MAX_SIZE, AreaLight, BakeObject, PointLight, SpotLight, SunLight
 
@@ -329,6 +330,9 @@ class Collector:
                 self._skip(NOT_EXPORTED[ob.type], source)
                 continue
             if ob.type not in GEOMETRY_TYPES or (parent is None and not inst.show_self):
+                continue
+            if parent is None and probe_lit(ob.original):
+                self._skip("Probe Light: it moves, the probes light it", source)
                 continue
             bake = parent is None and ob.type == "MESH" and source in self.layers
             emissive_only = False

@@ -8,8 +8,9 @@ import bpy
 import numpy as np
 
 from ..errors import BakeError
+from .probe_volumes import probe_volumes
 from ..scene import Scene
-from .common import DEFAULT_UV, uses_nodes
+from .common import DEFAULT_UV, probe_lit, uses_nodes
 from .evaluation import Collector, flatten, holdout, instancers, render_evaluation, rendered_names
 from .materials import Surface, read_surface
 from .world import export_world
@@ -71,7 +72,7 @@ def _targets(bl_scene, view_layer, objects, log) -> list:
     rendered = rendered_names(view_layer)
     if objects is None:
         targets = [o for o in bl_scene.objects if o.type == "MESH" and o.name in rendered
-                   and not holdout(o, view_layer)]
+                   and not holdout(o, view_layer) and not probe_lit(o)]
         unbakeable = {o.name: why for o in targets for why in [_unbakeable(o)] if why}
         if unbakeable:
             said = ", ".join(f"'{n}' ({why})" for n, why in list(unbakeable.items())[:6])
@@ -94,6 +95,9 @@ def _targets(bl_scene, view_layer, objects, log) -> list:
             if obj.type != "MESH":
                 raise BakeError(f"object '{name}' is a {obj.type.lower()}, not a mesh: convert it to a mesh "
                                 "to bake a lightmap for it")
+            if probe_lit(obj):
+                raise BakeError(f"object '{name}' has Probe Light on: it moves and the baked probes light it, so it "
+                                "gets no lightmap; turn Probe Light off to bake one")
             if holdout(obj, view_layer):
                 raise BakeError(f"object '{name}' is a holdout, which Cycles bakes black: turn Holdout off "
                                 "to bake it")
@@ -178,4 +182,5 @@ def export_scene(bl_scene, depsgraph=None, objects: Optional[Iterable[str]] = No
     stats["geometry"] = fingerprints(o for o in targets if o.name in baked)  # for the glTF export (identity.py)
     stats["file"] = bpy.data.filepath
     scene.export_stats = stats
+    scene.probe_volumes = probe_volumes(bl_scene, view_layer)
     return scene

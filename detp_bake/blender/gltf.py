@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import BakeError
 from ..lightmap import encoding, images, sh
+from . import gltf_probes
 from .atlas import ATLAS_UV, lightmap_of
 from .lightmaps import unwire
 from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY
@@ -153,14 +154,21 @@ def export_gltf(bl_scene, out_dir, path, estimator: Optional[str] = None, uv_lay
             for exr in dict.fromkeys(files.values())}
     state = _State(pngs)
     state.sh = {exr: sh_pngs(exr, axes) for exr, axes in sh_files(out_dir, estimator).items() if exr in pngs}
+    state.probes = gltf_probes.read(out_dir)
+    state.probe_lit = {o.name for o in bl_scene.objects if o.type == "MESH" and gltf_probes.probe_lit(o)} \
+        if state.probes else set()
     said = _write(path, targets, files, state)
     warnings = [f"glTF '{path.name}': no lightmap on {said}; written without one"] if said else []
     for warning in warnings:
         log(f"warning: {warning}")
     log(f"exported {path} with {len(pngs)} {estimator} lightmaps on {len(targets)} objects"
-        + (f", SH L1 maps of {len(state.sh)} ({SH_EXTENSION})" if state.sh else ""))
+        + (f", SH L1 maps of {len(state.sh)} ({SH_EXTENSION})" if state.sh else "")
+        + (f", {sum(len(g) for g in state.probes)} light probes lighting {len(state.probe_lit)} objects "
+           f"({gltf_probes.EXTENSION})" if state.probes else ""))
     return {"gltf": str(path), "estimator": estimator, "objects": sorted(files), "images": len(pngs),
-            "warnings": warnings, **({"sh": len(state.sh)} if state.sh else {})}
+            "warnings": warnings, **({"sh": len(state.sh)} if state.sh else {}),
+            **({"probes": sum(len(g) for g in state.probes), "probe_lit": sorted(state.probe_lit)}
+               if state.probes else {})}
 
 
 def _write(path: Path, targets: dict, files: dict, state: "_State") -> str:
@@ -197,6 +205,8 @@ def _lightmapped(glb: Path, files: dict) -> tuple[int, list]:
         if "mesh" not in node:
             continue
         seen.add(node.get("name"))
+        if gltf_probes.EXTENSION in (node.get("extensions") or {}):
+            continue  # lit by the probes, not by a lightmap (Probe Light)
         for prim in doc["meshes"][node["mesh"]].get("primitives", []):
             material = doc["materials"][prim["material"]] if "material" in prim else {}
             if EXTENSION in (material.get("extensions") or {}):
@@ -234,6 +244,8 @@ class _State:
         self.gltf_names = {}  # temporary material or mesh name -> the name the glTF shows
         self.textures = {}  # EXR path -> glTF texture, made once
         self.sh = {}  # EXR path -> the three L1/L0 PNGs (x, y, z in glTF's axes) of a --directional sh bake
+        self.probes = []  # the bake's probe grids, in glTF's axes (gltf_probes.py)
+        self.probe_lit = set()  # names of the objects lit by them
         self.sampler = None  # the one sampler all lightmaps share
         self.linear = None  # the L1/L0 maps' sampler: ratios may be blended
         self.done, self.errors = set(), []
@@ -249,7 +261,11 @@ class glTF2ExportUserExtension:
     def gather_material_hook(self, gltf_material, blender_material, export_settings):
         state = _STATE
         name = getattr(blender_material, "original", blender_material).name
-        if state is None or name not in state.materials:
+        if state is None:
+            return
+        if name not in state.materials:  # a probe-lit object's material (_without_probe_frame)
+            if name in state.gltf_names:
+                gltf_material.name = state.gltf_names[name]
             return
         try:
             exr = state.materials[name]
@@ -262,6 +278,24 @@ class glTF2ExportUserExtension:
             state.done.add(name)
         except Exception as exc:  # noqa: BLE001 (the exporter would hide it)
             state.errors.append(f"material '{name}': {exc!r}")
+
+    def gather_scene_hook(self, gltf_scene, blender_scene, export_settings):
+        state = _STATE
+        if state is None or not state.probes:
+            return
+        try:
+            if gltf_scene.extensions is None:
+                gltf_scene.extensions = {}
+            gltf_scene.extensions[gltf_probes.EXTENSION] = gltf_probes.scene_extension(state.probes)
+        except Exception as exc:  # noqa: BLE001 (the exporter would hide it)
+            state.errors.append(f"light probes: {exc!r}")
+
+    def gather_node_hook(self, gltf_node, blender_object, export_settings):
+        state = _STATE
+        if state is not None and getattr(blender_object, "name", None) in state.probe_lit:
+            if gltf_node.extensions is None:
+                gltf_node.extensions = {}
+            gltf_node.extensions[gltf_probes.EXTENSION] = gltf_probes.node_extension()
 
     def gather_mesh_hook(self, gltf_mesh, blender_mesh, blender_object, vertex_groups, modifiers, materials,
                          export_settings):
@@ -356,6 +390,8 @@ def _prepared(targets: dict, files: dict, state: _State):
                     copy.materials[index] = temp
             if not obj.material_slots:
                 copy.materials.append(_material_for(obj, 0, files[obj.name], state, made))
+        for name in state.probe_lit - {o.name for o in targets}:
+            _without_probe_frame(bpy.data.objects[name], state, made, slots)
         _name_split_materials(state)
         _STATE = state
         yield
@@ -406,6 +442,23 @@ def _material_for(obj, index: int, exr: str, state: _State, made: list):
     state.pairs[key] = temp.name
     state.gltf_names[temp.name] = key[0]
     return temp
+
+
+def _without_probe_frame(obj, state: _State, made: list, slots: list) -> None:
+    """A probe-lit object's slots show the user's own material (a temporary copy without the probe
+    frame *Apply* wired in), so the glTF carries its real shading."""
+    for index, slot in enumerate(obj.material_slots):
+        user = gltf_probes.user_material_of(obj, index, FRAME_NAME, _user_material)
+        if user is None:
+            continue
+        temp = user.copy()
+        temp.name = user.name + TEMP
+        made.append(temp)
+        if temp.node_tree.nodes.get(FRAME_NAME) is not None:
+            unwire(temp)
+        state.gltf_names[temp.name] = user.name
+        slots.append((slot, slot.material))
+        slot.material = temp
 
 
 def _name_split_materials(state: _State) -> None:

@@ -11,7 +11,7 @@ from ..errors import BakeError
 from ..lightmap import sh
 from . import sh_nodes
 from .atlas import ATLAS_UV, lightmap_of
-from .common import DEFAULT_UV, FRAME_NAME, REVERT_KEY, uses_nodes
+from .common import DEFAULT_UV, FRAME_NAME, PROBE_PROPERTY, REVERT_KEY, uses_nodes
 
 
 def load_image(path: str, name: str, sequence: bool = False, data: bool = False):
@@ -52,26 +52,41 @@ def _wire(mat, image, uv_name: str, frames: Optional[tuple] = None, l1: Optional
     `frames` (first, last): the image is a sequence whose file numbers are the scene's frames.
     `l1` ({L1x, L1y, L1z: image}): a directional lightmap, shaded by the SH group (sh_nodes.py)
     against the material's normal before the multiply."""
+    def light(nt, frame, x0, normal):
+        uv = nt.nodes.new("ShaderNodeUVMap")
+        uv.uv_map = uv_name
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = image
+        tex.interpolation = "Linear"
+        if frames is not None:
+            # Blender shows file number (frame − frame_start + 1, held within the duration) + offset.
+            first, last = frames
+            user = tex.image_user
+            user.frame_duration = last - first + 1
+            user.frame_start = first
+            user.frame_offset = first - 1
+            user.use_cyclic = False
+            user.use_auto_refresh = True
+        for i, node in enumerate((uv, tex)):
+            node.parent = frame
+            node.location = (x0 + 250.0 * i, -400.0)
+        nt.links.new(uv.outputs["UV"], tex.inputs["Vector"])
+        if l1:
+            return sh_nodes.wire(nt, frame, tex.outputs["Color"], l1, uv.outputs["UV"], normal, x0 + 250.0)
+        return tex.outputs["Color"]
+    wire_light(mat, light)
+
+
+def wire_light(mat, light: Callable) -> None:
+    """Add the node frame that shows baked light: `light(nt, frame, x0, normal)` adds its nodes
+    (a lightmap, a probe's SH) and returns the socket of E/π; × base colour → Emission → an EEVEE
+    output made active. `normal`: the socket of the surface's shading normal, None for its own."""
     nt = mat.node_tree
     previous = [n.name for n in nt.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output]
     src, const, normal = _base_colour_source(nt)
     frame = nt.nodes.new("NodeFrame")
     frame.name = frame.label = FRAME_NAME
     x0 = max((n.location.x for n in nt.nodes if n is not frame), default=0.0) + 300.0
-    uv = nt.nodes.new("ShaderNodeUVMap")
-    uv.uv_map = uv_name
-    tex = nt.nodes.new("ShaderNodeTexImage")
-    tex.image = image
-    tex.interpolation = "Linear"
-    if frames is not None:
-        # Blender shows file number (frame − frame_start + 1, held within the duration) + offset.
-        first, last = frames
-        user = tex.image_user
-        user.frame_duration = last - first + 1
-        user.frame_start = first
-        user.frame_offset = first - 1
-        user.use_cyclic = False
-        user.use_auto_refresh = True
     mix = nt.nodes.new("ShaderNodeMix")
     mix.data_type = "RGBA"
     mix.blend_type = "MULTIPLY"
@@ -79,19 +94,15 @@ def _wire(mat, image, uv_name: str, frames: Optional[tuple] = None, l1: Optional
     emit = nt.nodes.new("ShaderNodeEmission")
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     out.target = "EEVEE"
-    for i, node in enumerate((uv, tex, mix, emit, out)):
+    for i, node in enumerate((mix, emit, out)):
         node.parent = frame
-        node.location = (x0 + 250.0 * i, -400.0)
-    nt.links.new(uv.outputs["UV"], tex.inputs["Vector"])
+        node.location = (x0 + 250.0 * (i + 2), -400.0)
     a, b = mix.inputs[6], mix.inputs[7]  # the RGBA pair of ShaderNodeMix
     if src is not None:
         nt.links.new(src, a)
     else:
         a.default_value = const
-    light = tex.outputs["Color"]
-    if l1:
-        light = sh_nodes.wire(nt, frame, light, l1, uv.outputs["UV"], normal, x0 + 250.0)
-    nt.links.new(light, b)
+    nt.links.new(light(nt, frame, x0, normal), b)
     nt.links.new(mix.outputs[2], emit.inputs["Color"])
     nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
     out.is_active_output = True
@@ -123,14 +134,16 @@ def _use_nodes(mat) -> None:
 
 
 def apply_lightmap(obj, image, uv_name: str, shared: bool = False, frames: Optional[tuple] = None,
-                   l1: Optional[dict] = None) -> None:
+                   l1: Optional[dict] = None, light: Optional[Callable] = None) -> None:
     """Show `image` on `obj`'s materials. A material other baked objects also use is copied for
     this object (`shared`), and so is every material of a mesh other objects share (the copy goes
     in an object-level slot, so the other objects keep theirs); an empty slot gets a new material.
-    `l1` ({L1x, L1y, L1z: image}): shade it as a directional lightmap. All of it is undone by `revert`."""
+    `l1` ({L1x, L1y, L1z: image}): shade it as a directional lightmap. `light` (see `wire_light`)
+    instead of `image`: other baked light (a probe's SH). All of it is undone by `revert`."""
     if REVERT_KEY in obj:
         raise BakeError(f"object '{obj.name}' already shows a lightmap: revert it first")
-    record = {"slots": [], "added_slots": 0, "image": image.name, "l1_images": [i.name for i in (l1 or {}).values()]}
+    record = {"slots": [], "added_slots": 0, "image": image.name if image is not None else "",
+              "l1_images": [i.name for i in (l1 or {}).values()]}
     if not obj.material_slots:
         obj.data.materials.append(None)
         record["added_slots"] = 1
@@ -159,7 +172,10 @@ def apply_lightmap(obj, image, uv_name: str, shared: bool = False, frames: Optio
             mat = original
         record["slots"].append(entry)
         if mat.node_tree.nodes.get(FRAME_NAME) is None:
-            _wire(mat, image, uv_name, frames, l1)
+            if light is not None:
+                wire_light(mat, light)
+            else:
+                _wire(mat, image, uv_name, frames, l1)
     obj[REVERT_KEY] = json.dumps(record, allow_nan=False)
 
 
@@ -192,6 +208,8 @@ def revert(obj) -> bool:
         for _ in range(added):
             obj.data.materials.pop()
     del obj[REVERT_KEY]
+    for key in [k for k in obj.keys() if k.startswith(PROBE_PROPERTY)]:
+        del obj[key]  # a probe-lit object's SH (blender/probe_light.py)
     sh_nodes.remove_unused()  # a removed copy may have been the last user of the SH group
     for name in [record.get("image", ""), *record.get("l1_images", [])]:
         img = bpy.data.images.get(name)

@@ -6,17 +6,22 @@ channel (L0 a float, L1 a vector), node for node the numpy formula; "detp_bake S
 and per-axis L1 colours into channels, runs the channel group on each and joins them; "detp_bake
 dominant" does the same with each channel's L1 rebuilt from a dominant-direction map
 (`sh.from_dominant`: the direction times L0 times the directionality).
+"detp_bake SH L2" is a light probe's `sh9.irradiance` (nine radiance colours in, E/π out) for
+probe-lit objects (probe_light.py).
 Normals are world space, as L1 is (Geometry › Normal and a Normal Map node's output both are).
 Revert removes a group when nothing uses it any more (`remove_unused`)."""
 from __future__ import annotations
 
 import bpy
+import numpy as np
 
 from ..lightmap import sh
+from ..probes import sh9
 
 GROUP = "detp_bake SH"
 DOMINANT_GROUP = "detp_bake dominant"
 CHANNEL_GROUP = "detp_bake SH channel"
+PROBE_GROUP = "detp_bake SH L2"
 TAG = "detp_bake_sh"  # custom property: a group this module made (its formula's version)
 VERSION = 1
 
@@ -134,6 +139,39 @@ def _dominant_group():
     return ng
 
 
+def _probe_group():
+    """A probe's SH L2 (nine radiance colours C0 … C8, probes/sh9.py) → E(n)/π at world normal n:
+    Σ_k (A_l/π) Y_k(n) C_k, sh9.irradiance node for node."""
+    ng, i, o = _new_group(PROBE_GROUP, [("Normal", "NodeSocketVector")] +
+                          [(f"C{k}", "NodeSocketColor") for k in range(sh9.COEFFICIENTS)],
+                          [("Color", "NodeSocketColor")])
+    split = ng.nodes.new("ShaderNodeSeparateXYZ")
+    ng.links.new(i["Normal"], split.inputs[0])
+    x, y, z = split.outputs
+    polynomial = (1.0, y, z, x, _math(ng, "MULTIPLY", x, y), _math(ng, "MULTIPLY", y, z),
+                  _math(ng, "MULTIPLY_ADD", _math(ng, "MULTIPLY", z, z), 3.0, -1.0),
+                  _math(ng, "MULTIPLY", x, z),
+                  _math(ng, "SUBTRACT", _math(ng, "MULTIPLY", x, x), _math(ng, "MULTIPLY", y, y)))
+    # Y_k(n) = constant_k · polynomial_k(n): the constants read off sh9.basis at a direction where
+    # no polynomial is 0.
+    d = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
+    x_, y_, z_ = d
+    at = sh9.basis(d) / np.array([1.0, y_, z_, x_, x_ * y_, y_ * z_, 3 * z_ * z_ - 1, x_ * z_, x_ * x_ - y_ * y_])
+    total = None
+    for k, term in enumerate(polynomial):
+        factor = float(sh9.COSINE_OVER_PI[k] * at[k])
+        scale = _math(ng, "MULTIPLY", term, factor) if k else factor
+        term_colour = _vmath(ng, "SCALE", i[f"C{k}"], scale=scale)
+        total = term_colour if total is None else _vmath(ng, "ADD", total, term_colour)
+    ng.links.new(total, o["Color"])
+    return ng
+
+
+def probe_group():
+    """The probe SH group, made once per file."""
+    return _group(PROBE_GROUP, _probe_group)
+
+
 def _group(name: str, make):
     """Our group of that name (this version), made when missing."""
     for ng in bpy.data.node_groups:
@@ -170,7 +208,7 @@ def wire(nt, frame, l0_socket, l1_images: dict, uv_socket, shading, x: float):
 
 def remove_unused() -> None:
     """Remove our groups nothing uses any more (the SH group first: it uses the channel group)."""
-    for name in (GROUP, DOMINANT_GROUP, CHANNEL_GROUP):
+    for name in (GROUP, DOMINANT_GROUP, CHANNEL_GROUP, PROBE_GROUP):
         for ng in [g for g in bpy.data.node_groups if g.name.split(".")[0] == name and TAG in g]:
             if ng.users == 0:
                 bpy.data.node_groups.remove(ng)

@@ -195,6 +195,7 @@ def run_bake(args, bl_scene=None, cancel=None) -> dict:
     saved = None
     if args.apply:
         blender.apply_all(bl_scene, files, args.uv_layer, settings.estimator, log=_log)
+        blender.apply_marked(bl_scene, report.parent, log=_log)  # objects marked Probe Light
     if args.save:
         saved = Path(args.save).resolve()
         blender.save_blend(saved, files)

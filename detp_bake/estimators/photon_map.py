@@ -11,8 +11,8 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from ..kdtree import KDTree
 from ..rays import RayCaster
 from ..lightmap.validity import LIFT
 from .base import Estimate, Estimator, register
@@ -103,7 +103,7 @@ class PhotonMap(Estimator):
             counters.update(seconds_build=0.0, seconds_query=0.0)
             return Estimate(irradiance, counters, l1)
         # An unbalanced, non-compact tree builds several times faster and queries about as fast.
-        tree = cKDTree(pos, balanced_tree=False, compact_nodes=False)
+        tree = KDTree(pos, balanced=False, compact=False)
         t1 = time.perf_counter()
         cos_min = float(self.settings.normal_agreement)
         walls = _Walls(self.texels, self.context.scene)
@@ -112,7 +112,7 @@ class PhotonMap(Estimator):
             b = min(n, a + CHUNK)
             x = self.texels.position[a:b]
             nrm = self.texels.normal[a:b]
-            dist, idx = tree.query(x, k=k, workers=-1)
+            dist, idx = tree.query(x, k)
             dist = dist.reshape(b - a, k)
             idx = idx.reshape(b - a, k)
             near = idx[:, :k - 1]

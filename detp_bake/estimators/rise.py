@@ -14,9 +14,8 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
+from ..components import connected_components
 from ..lightmap.texels import TexelSet, lightmap_triangles
 
 SMALL_PIECE = 64  # vertices: a piece this small is measured from its vertices when texels are too few
@@ -34,8 +33,7 @@ def _welded(positions: np.ndarray):
     n = int(vertex.max()) + 1
     a = np.concatenate([vertex[:, 0], vertex[:, 1]])
     b = np.concatenate([vertex[:, 1], vertex[:, 2]])
-    graph = coo_matrix((np.ones(a.size, np.int8), (a, b)), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
+    _, label = connected_components(n, a, b)
     return label[vertex[:, 0]].astype(np.int64), corners[first].astype(np.float64), label.astype(np.int64)
 
 

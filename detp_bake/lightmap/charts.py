@@ -11,8 +11,8 @@ fixes: merged charts at the lightmap's texel density (xatlas), or a higher resol
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+
+from ..components import connected_components
 
 NARROW = 4.0  # median chart width (texels) under which a lightmap is called fragmented
 BORDER = 0.5  # ... or this share of border texels
@@ -54,8 +54,7 @@ def chart_of_triangles(uv: np.ndarray, positions: np.ndarray | None = None,
     corner = (_corners(uv, positions) if corner is None else corner).reshape(-1)
     tri = np.repeat(np.arange(t), 3)
     n = t + int(corner.max()) + 1
-    graph = coo_matrix((np.ones(3 * t, np.int8), (tri, t + corner)), shape=(n, n))
-    count, label = connected_components(graph, directed=False)
+    count, label = connected_components(n, tri, t + corner)
     chart = label[:t]
     _, chart = np.unique(chart, return_inverse=True)
     return int(chart.max()) + 1, chart.reshape(-1)

@@ -47,8 +47,9 @@ from typing import Optional
 import numba
 import numpy as np
 
-from scipy.ndimage import distance_transform_edt, find_objects
 
+from ..components import label_boxes
+from ..distance_transform import distance_transform
 from ..errors import BakeError
 from .texels import dilate, neighbour_pairs
 
@@ -224,7 +225,7 @@ def _touching(label: np.ndarray, count: int, reach: int) -> np.ndarray:
     """Sorted codes a·count + b of labels a ≠ b that lie within `reach` texels of each other (1:
     8-neighbours): each gutter texel within reach/2 takes its nearest covered texel's label."""
     if reach > 1:
-        far, (rows, cols) = distance_transform_edt(label < 0, return_indices=True)
+        far, (rows, cols) = distance_transform(label < 0)
         label = np.where(far <= 0.5 * reach + 0.5, label[rows, cols], -1)
     touch = np.zeros(0, np.int64)
     for a, b in neighbour_pairs(label):
@@ -261,7 +262,7 @@ def region_runs(regions: Optional[np.ndarray], mask: np.ndarray, reach: int = 1)
             taken[near[r]] = True
     runs = [(whole, mask & first[np.maximum(label, 0)], True)]
     h, w = mask.shape
-    for r, found in enumerate(find_objects(label + 1)):
+    for r, found in enumerate(label_boxes(label)):
         if first[r] or found is None:  # None: a region none of whose texels is in `mask`
             continue
         rows, cols = found

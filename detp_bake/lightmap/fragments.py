@@ -19,8 +19,9 @@ Where photons are few a texel (a small object at a fixed resolution: a chair's l
 one such mean is still noisy, and so is OIDN's image. So the mean is taken again over the last
 pass's means (`passes_for`: as many passes as the lightmap's measured noise asks, noise.py), which
 widens the kernel along the surface through the same neighbours and rays (no new ones, so no
-wall is crossed), and a lightmap whose noise is over STARVED has its charts narrower than
-STARVED_WIDTH smoothed here instead of by OIDN (which still cleans a wide chart best). On the
+wall is crossed), and a lightmap that can expect under STARVED_PHOTONS photons a texel has its
+charts narrower than STARVED_WIDTH smoothed here instead of by OIDN (which still cleans a wide
+chart best). On the
 downloaded living room (benchmarks/race.py, 128² per object, 1M photons, against Cycles at 512
 samples): 11.2 % error per texel with one pass and OIDN on every chart wide enough,
 6.2 % so (the label 221 → 44 %, the legs 115 → 50 %, walls and floor unchanged).
@@ -30,11 +31,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .charts import chart_widths
 from ..sampling import jit
 from ..bvh import discs_meet_triangles
+from ..kdtree import KDTree
 from .texels import TexelSet, geometric_normals, lightmap_triangles
 from .validity import blocked_between
 
@@ -44,7 +45,7 @@ SIGMA = 1.5  # the Gaussian's width, texel sizes; neighbours beyond 3 SIGMA are 
 COS = 0.9  # shading normals at least this aligned count as one surface
 PASS_NOISE = 0.33  # relative noise (noise.py) up to which fragments take one weighted mean (passes_for)
 MAX_PASSES = 32  # the most weighted means taken in turn: each widens the kernel along the surface
-STARVED = 0.3  # a lightmap's relative noise over which charts up to STARVED_WIDTH are smoothed here
+STARVED_PHOTONS = 4.0  # photons a texel (by area) under which a lightmap's charts up to STARVED_WIDTH skip OIDN
 STARVED_WIDTH = 32.0  # texels: a starved lightmap's charts narrower than this skip OIDN (wider ones it still
 # cleans best: a 64-texel plane at 10 photons a texel, 7.9 % per texel by OIDN, 10.5 % smoothed)
 LIFT = 0.25  # texel sizes: rays between neighbours pass this far above the surface (over a convex curve's chord)
@@ -121,13 +122,30 @@ def passes_for(noise) -> int:
     return int(min(MAX_PASSES, round((noise / PASS_NOISE) ** 2)))
 
 
-def find(texels: TexelSet, lm, scene, caster, threads: int = 1, noise=None) -> Fragments | None:
+def starved_lightmaps(texels: TexelSet, scene, photons: int) -> frozenset:
+    """Names of the lightmaps that can expect fewer than STARVED_PHOTONS photons a texel, the bake's
+    `photons` dealt out by surface area (their texels' area over all the scene's triangles'),
+    known before tracing: small objects at a fixed resolution."""
+    p = np.asarray(scene.positions, np.float64)
+    total = 0.5 * float(np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
+    if not (photons > 0 and total > 0.0):
+        return frozenset()
+    return frozenset(lm.name for lm in texels.lightmaps
+                     if lm.count and photons * float(texels.area[lm.texels].sum()) / total / lm.count < STARVED_PHOTONS)
+
+
+def set_passes(found: dict, noise: dict) -> None:
+    """Each lightmap's fragments (`found`: {name: Fragments or None}) take passes_for its measured
+    noise (`noise`: {name: noise.py's figure}, as far as measured), once the photons are traced."""
+    for name, fragments in found.items():
+        if fragments is not None:
+            fragments.passes = passes_for(noise.get(name))
+
+
+def find(texels: TexelSet, lm, scene, caster, threads: int = 1, starved: bool = False) -> Fragments | None:
     """The fragments of lightmap `lm` and their neighbours (module docstring), or None when it has
-    none: the texels of its charts narrower than FRAGMENT texels, or than STARVED_WIDTH when its
-    measured relative noise (`noise`: {lightmap name: noise.py's figure}, as far as measured) is
-    over STARVED."""
-    level = (noise or {}).get(lm.name)
-    starved = level is not None and level > STARVED
+    none: the texels of its charts narrower than FRAGMENT texels, or than STARVED_WIDTH for a
+    `starved` lightmap (starved_lightmaps)."""
     local = fragment_texels(texels, lm, scene, STARVED_WIDTH if starved else FRAGMENT)
     if local.size == 0:
         return None
@@ -135,7 +153,7 @@ def find(texels: TexelSet, lm, scene, caster, threads: int = 1, noise=None) -> F
     pos = texels.position[sl]
     size = lm.texel_size
     k = min(NEIGHBOURS, lm.count)
-    dist, near = cKDTree(pos).query(pos[local], k=k, distance_upper_bound=3 * SIGMA * size, workers=max(1, threads))
+    dist, near = KDTree(pos).query(pos[local], k, distance_upper_bound=3 * SIGMA * size)
     dist, near = dist.reshape(len(local), k), near.reshape(len(local), k)
     found = near < lm.count
     near = np.where(found, near, local[:, None])
@@ -158,4 +176,4 @@ def find(texels: TexelSet, lm, scene, caster, threads: int = 1, noise=None) -> F
     alone = ~(weight.sum(axis=1) > 0)  # a texel of no area with every neighbour hidden keeps its own value
     near[alone, 0], weight[alone, 0] = local[alone], 1.0
     pixel = texels.pixel[sl].astype(np.int64)
-    return Fragments(pixel[local], pixel[near].astype(np.int32), weight.astype(np.float32), passes_for(level))
+    return Fragments(pixel[local], pixel[near].astype(np.int32), weight.astype(np.float32))

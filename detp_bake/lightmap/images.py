@@ -14,7 +14,13 @@ from ..errors import BakeError
 
 
 def _oiio():
-    import OpenImageIO as oiio
+    """OpenImageIO's module: Blender's own inside Blender (4.5 and later ship it; the extension does
+    not bundle it), the pinned wheel outside it."""
+    try:
+        import OpenImageIO as oiio
+    except ImportError as exc:
+        raise BakeError("writing lightmaps needs OpenImageIO's Python module: Blender 4.5 and later "
+                        "ship it; outside Blender, pip install OpenImageIO (requirements/)") from exc
     return oiio
 
 

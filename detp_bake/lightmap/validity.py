@@ -37,10 +37,9 @@ from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from ..bvh import TriangleTree
+from ..components import connected_components
 from ..sampling import inline
 from .texels import TexelSet, geometric_normals, lightmap_triangles, neighbour_pairs, pixel_steps
 
@@ -428,8 +427,7 @@ def regions(texels: TexelSet, lm, cuts: Cuts, caster, scene) -> np.ndarray:
         near = (length > 0) & (length < NEIGHBOURS * lm.texel_size)
         keep[test[blocked & near]] = False
     links = pairs[keep]
-    graph = coo_matrix((np.ones(len(links), np.int8), (links[:, 0], links[:, 1])), shape=(lm.count, lm.count))
-    _, label = connected_components(graph, directed=False)
+    _, label = connected_components(lm.count, links[:, 0], links[:, 1])
     out = np.full(lm.width * lm.height, -1, np.int32)
     out[texels.pixel[sl]] = label
     return out.reshape(lm.height, lm.width)

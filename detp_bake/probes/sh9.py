@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..sampling import inline
+
 COEFFICIENTS = 9
 # The real SH basis constants, band by band (Y_00; Y_1m; Y_2m).
 _Y00 = 0.5 * np.sqrt(1.0 / np.pi)
@@ -73,3 +75,15 @@ def uniform(value: np.ndarray) -> np.ndarray:
     out = np.zeros((COEFFICIENTS, 3))
     out[0] = np.asarray(value, dtype=np.float64) * 2.0 * np.sqrt(np.pi)
     return out
+
+
+@inline
+def add_sh(out, i, x, y, z, w0, w1, w2):
+    """out[i, k, c] += w_c · Y_k(x, y, z): radiance weight w arriving from unit direction (x, y, z).
+    The compiled kernels' `project` (gather.py, photon_sphere.py, masked_bounce.py), inlined."""
+    ys = (_Y00, _Y1 * y, _Y1 * z, _Y1 * x, _Y2A * x * y, _Y2A * y * z, _Y20 * (3.0 * z * z - 1.0),
+          _Y2A * x * z, _Y22 * (x * x - y * y))
+    for k in range(9):
+        out[i, k, 0] += w0 * ys[k]
+        out[i, k, 1] += w1 * ys[k]
+        out[i, k, 2] += w2 * ys[k]

@@ -71,11 +71,12 @@ def l1_value(est_l1, direct_l1, share) -> np.ndarray:
     return total.astype(np.float32)
 
 
-def make_images(result, l1, regions=None, fragments_of=None, sharp=None) -> None:
+def make_images(result, l1, plan=None, sharp=None) -> None:
     """Fill `result.l1_images` (sh: (H, W, 9) in sh.L1_CHANNELS order; dominant: (H, W, 4) in
     sh.DOMINANT_CHANNELS order) from the per-texel L1 (N, 9), and `result.directional`. `sharp`:
     the shadow rays' E (N, 3) and L1 (N, 9) of point, spot and sun lights, kept undenoised as the
-    plain lightmap keeps them (finishing.Finishing)."""
+    plain lightmap keeps them (finishing.Finishing); `plan`: the denoiser's regions and fragments
+    (finishing.Denoising)."""
     settings, texels = result.settings, result.texels
     denoise = settings.denoise and denoise_mod.available()
     clamped = 0
@@ -85,7 +86,7 @@ def make_images(result, l1, regions=None, fragments_of=None, sharp=None) -> None
         raw1, _ = texels_mod.to_image(l1[lm.texels], lm, pixel)
         changed = sh.clamp(raw0, sh.from_layout(raw1))
         if denoise:
-            out = _denoised(settings, texels, lm, pixel, mask, raw0, raw1, regions, fragments_of, sharp)
+            out = _denoised(settings, texels, lm, pixel, mask, raw0, raw1, plan, sharp)
         else:
             out = texels_mod.dilate(raw1, mask, settings.margin)
         l0 = result.images[lm.name]
@@ -105,12 +106,12 @@ def make_images(result, l1, regions=None, fragments_of=None, sharp=None) -> None
                           **({"axis_files": list(sh.AXIS_FILES)} if settings.directional == "sh" else {})}
 
 
-def _denoised(settings, texels, lm, pixel, mask, raw0, raw1, regions, fragments_of, sharp) -> np.ndarray:
+def _denoised(settings, texels, lm, pixel, mask, raw0, raw1, plan, sharp) -> np.ndarray:
     """One lightmap's L1 (H, W, 9), denoised as the module's docstring says."""
     area, _ = texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)
-    frag = fragments_of(lm) if fragments_of is not None else None
+    frag = plan.fragments.get(lm.name) if plan is not None else None
     run = partial(denoise_mod.denoise_lightmap, mask=mask, margin=settings.margin, weights=area[..., 0],
-                  regions=(regions or {}).get(lm.name), fragments=frag)
+                  regions=plan.regions.get(lm.name) if plan is not None else None, fragments=frag)
     kept = None
     if sharp is not None:
         kept0, _ = texels_mod.to_image(sharp[0][lm.texels] / np.float32(np.pi), lm, pixel)

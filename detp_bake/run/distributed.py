@@ -10,7 +10,7 @@ What crosses the wire is plain: the bake's inputs (bake.TraceJob, pickled once a
 every worker), which a worker unpacks once and keeps with the tracer and the estimators it builds
 from them (the disc index); and back, dicts of numpy arrays and numbers. Classes travel by their
 name in the core (`detp_bake.…`) whatever the client's import path (Blender's `bl_ext.…`), so a
-worker needs the core and its dependencies (numpy, embreex, numba, scipy) and no Blender: either
+worker needs the core and its dependencies (numpy, embreex, numba) and no Blender: either
 `detp_bake` importable there (PYTHONPATH), or the client uploads its own copy (`upload_core`).
 
 Dask is imported only here, and only when a Cluster connects.

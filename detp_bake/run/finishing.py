@@ -1,28 +1,58 @@
 """One estimator's E/π per texel made into its lightmap images: dilated, or denoised by region with
 the fragments smoothed, the direct light apart. The last step of a bake (bake.py), and the one that
 holds the most images at once, so what it keeps and lets go is spelled out on one object.
+
+What the denoiser keeps apart (regions) and smooths instead (fragments) is found before tracing
+(`plan`), while the texels' positions and normals are at hand: the bake then sets them aside once,
+for tracing and the images, and finds them again at its end (texels.geometry_set_aside).
 """
 from __future__ import annotations
 
-import contextlib
 import time
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Callable, Optional
+from typing import Optional
 
 import numpy as np
 
 from .. import estimators
-from ..lightmap import denoise as denoise_mod, texels as texels_mod
+from ..lightmap import denoise as denoise_mod, fragments as fragments_mod, texels as texels_mod, validity
 
 # From this many pixels a lightmap's soft direct light (area lights, emissive meshes, the sky) and its
 # indirect light are denoised together: one OIDN run instead of two, where OIDN costs more than the
 # photons (docs/real_levels.md). At 64² on the project's scenes together was 0.2-0.5 points of RMSE
 # worse on the L-room and the Cornell box, 0.2-0.7 better on the window room and the courtyard.
 ONE_PASS_FROM = 1024 * 1024
-# From this many pixels the texels' positions and normals are set aside while a lightmap is
-# denoised, found again after (about 0.1 s a million texels on 2 cores): 48 bytes a texel.
-ASIDE_FROM = 1024 * 1024
+
+
+@dataclass
+class Denoising:
+    """What the denoiser of every lightmap needs from the texels' geometry, found once: `regions`
+    {lightmap: texels that see each other (validity.regions), the objects of an atlas apart
+    (validity.by_object)}, denoised apart; `fragments` {lightmap: the texels of charts too narrow for
+    OIDN and their neighbours on the surface (fragments.find), or None}, smoothed instead."""
+    regions: dict = field(default_factory=dict)
+    fragments: dict = field(default_factory=dict)
+    seconds: dict = field(default_factory=dict)
+
+
+def plan(texels, scene, caster, threads: int, photons: int = 0) -> Denoising:
+    """The regions and fragments of every lightmap (Denoising), with the seconds each took; with
+    `photons` (the bake's), a lightmap that can expect few a texel has its wider charts among its
+    fragments too (fragments.starved_lightmaps)."""
+    out = Denoising()
+    t0 = time.perf_counter()
+    for lm in texels.lightmaps:
+        if texels.cuts is not None and (texels.cuts.of[lm.texels] >= 0).any():
+            out.regions[lm.name] = validity.regions(texels, lm, texels.cuts, caster, scene)
+        if len(lm.members) > 1:
+            out.regions[lm.name] = validity.by_object(texels, lm, scene, out.regions.get(lm.name))
+    t1 = time.perf_counter()
+    starved = fragments_mod.starved_lightmaps(texels, scene, photons)
+    out.fragments = {lm.name: fragments_mod.find(texels, lm, scene=scene, caster=caster, threads=threads,
+                                                 starved=lm.name in starved) for lm in texels.lightmaps}
+    out.seconds = {"regions": t1 - t0, "fragments": time.perf_counter() - t1}
+    return out
 
 
 @dataclass
@@ -42,18 +72,13 @@ class Finishing:
     denoised on its own and the rest (the indirect estimate) on its own; this object may hold its
     only reference, and lets it go once the last lightmap has taken its part. `sharp`: the part of
     `direct` from point, spot and sun lights, kept as the shadow rays give it (exact away from
-    penumbrae; docs/real_levels.md). `regions`: {lightmap: texels that see each other
-    (validity.regions)}, each denoised apart. `fragments_of(lm)`: the texels of charts too narrow
-    for OIDN and their neighbours on the surface (fragments.find), smoothed instead. `aside()`: a
-    context in which the texels' positions and normals are set aside, for the denoise of lightmaps
-    of ASIDE_FROM pixels or more (texels.geometry_set_aside)."""
+    penumbrae; docs/real_levels.md). `denoising`: the regions denoised apart and the fragments
+    smoothed instead (`plan`); it reads no texel position or normal."""
     settings: object  # settings.BakeSettings
     texels: texels_mod.TexelSet
     direct: Optional[np.ndarray] = None
     sharp: Optional[np.ndarray] = None
-    regions: dict = field(default_factory=dict)
-    fragments_of: Optional[Callable] = None
-    aside: Optional[Callable] = None
+    denoising: Denoising = field(default_factory=Denoising)
 
     def images(self, value: np.ndarray, counters: dict) -> Images:
         """The per-texel E/π `value` as dilated (and denoised) images."""
@@ -84,17 +109,14 @@ class Finishing:
         return out
 
     def _denoised(self, lm, value, counters) -> tuple:
-        """Lightmap `lm` denoised (by region, its fragments smoothed) and its mask. The fragments are
-        found first, the last read of the texels' geometry, which `aside()` may then set aside."""
+        """Lightmap `lm` denoised (by region, its fragments smoothed) and its mask."""
         pixel = self.texels.pixel[lm.texels]
         mask = np.zeros(lm.height * lm.width, bool)
         mask[pixel] = True
         mask = mask.reshape(lm.height, lm.width)
-        frag = self.fragments_of(lm) if self.fragments_of is not None else None
+        frag = self.denoising.fragments.get(lm.name)
         counters["fragment_texels"] = counters.get("fragment_texels", 0) + (len(frag) if frag else 0)
-        big = self.aside is not None and lm.width * lm.height >= ASIDE_FROM
-        with (self.aside() if big else contextlib.nullcontext()):
-            return self._parts(lm, value, frag, mask, pixel), mask
+        return self._parts(lm, value, frag, mask, pixel), mask
 
     def _parts(self, lm, value, frag, mask, pixel) -> np.ndarray:
         """With `direct`, the indirect part and the soft emitters' direct part are denoised apart
@@ -104,7 +126,7 @@ class Finishing:
         texels, margin = self.texels, self.settings.margin
         area = lambda: texels_mod.to_image(texels.area[lm.texels, None], lm, pixel)[0][..., 0]  # noqa: E731
         denoised = partial(denoise_mod.denoise_lightmap, mask=mask, margin=margin, weights=area,
-                           regions=self.regions.get(lm.name), fragments=frag,
+                           regions=self.denoising.regions.get(lm.name), fragments=frag,
                            apart=denoise_mod.FILL_RINGS if len(lm.members) > 1 else 1, own=True)
         image = lambda values: texels_mod.to_image(values, lm, pixel)[0]  # noqa: E731
         if self.direct is None:

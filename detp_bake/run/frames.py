@@ -192,10 +192,9 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange,
             label = _frame_label(k, n, frame)
             inputs = _digest([np.frombuffer(f"{__version__}|{settings_key}|{range_key}|{lights[k]}|".encode() +
                                             json.dumps(sorted(signatures[k].items())).encode(), np.uint8)])
-            old = previous.get(frame)
-            if old is not None and old.get("inputs") == inputs and all(
-                    os.path.isfile(f) for o in old["objects"] for f in o["files"]):
+            if _unchanged(previous.get(frame), inputs):
                 report(bake_mod.Progress("write", 1.0, f"{label} · unchanged since the last bake: kept", part=(k, n)))
+                old = previous[frame]
                 _add(result, frame, {**old, "kept": True}, {o["name"]: o["files"] for o in old["objects"]})
                 skipped.append(frame)
                 _write_report(result, frames, settings_report, evaluate_seconds, time.perf_counter() - t_start)
@@ -229,6 +228,14 @@ def bake_frames(scene_at: Callable[[int], Scene], frames: FrameRange,
             f"({_ranges(skipped)}); --force bakes them again")
     result.skipped = skipped
     return result
+
+
+def _unchanged(old: Optional[dict], inputs: str) -> bool:
+    """Whether a frame's earlier report section has these inputs and all its files (lightmaps, and
+    its probes when it had some) are still there."""
+    return old is not None and old.get("inputs") == inputs and all(
+        os.path.isfile(f) for o in old["objects"] for f in o["files"]) and \
+        os.path.isfile(old.get("probes", {}).get("file", __file__))
 
 
 def _evaluate(scene_at, numbers, report, cancelled):

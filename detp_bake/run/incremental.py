@@ -103,7 +103,7 @@ def sky_or_sun(scene: Scene) -> bool:
 def settings_key(settings) -> str:
     """The settings that reach a lightmap's file (not threads or the memory budget), as JSON."""
     values = asdict(settings)
-    for name in ("threads", "memory_budget_mb"):
+    for name in ("threads", "memory_budget_mb", "probes", "probe_spacing", "probe_rays"):  # probes: not a lightmap's
         values.pop(name, None)
     if values.get("directional") == "none" and not values.get("shadowmask"):
         for name in ("directional", "shadowmask", "shadowmask_mode"):
@@ -186,7 +186,8 @@ def plan(scene: Scene, settings, out_dir, force: bool = False) -> Plan:
     `force` reuses nothing."""
     names = [o.name for o in scene.objects if o.bake]
     result = Plan(object_keys(scene, settings, names, disc_reach(scene, settings, names)), bake=list(names))
-    if not reusable(settings):
+    if not reusable(settings) or settings.probes != "off":
+        # Probes read every lightmap of their bake (probes/gather.py): a bake with probes bakes all.
         return result
     result.previous = previous_report(out_dir)
     entries = _entries(result.previous, out_dir)

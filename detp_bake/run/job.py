@@ -31,7 +31,7 @@ from ..errors import BakeCancelled, BakeError
 
 # Share of the whole job each phase stands for (the progress bar and the ETA).
 PHASES = {"export": (0.0, 0.0), "direct": (0.0, 0.1), "prepare": (0.1, 0.15), "trace": (0.15, 0.9),
-          "estimate": (0.9, 0.97), "write": (0.97, 1.0)}
+          "estimate": (0.9, 0.96), "probes": (0.96, 0.98), "write": (0.98, 1.0)}
 # A slow preview (the photon map's gather over every hit so far, on the worker: tracing waits for
 # it) waits this many times as long as it took before the next, so previews cost at most a sixth
 # of the bake.
@@ -57,7 +57,7 @@ class Started(Event):
 
 @dataclass
 class Phase(Event):
-    phase: str  # direct, prepare, trace, estimate, write
+    phase: str  # direct, prepare, trace, estimate, probes, write
 
 
 @dataclass

@@ -47,9 +47,9 @@ PIXEL_BYTES = 12 + 4 + 2
 # (OIDN writes over it), the part denoised before it, the sharp lights' part added after.
 OIDN_BYTES_PER_PIXEL = 560
 OIDN_MOST = 115_000_000
-# Measured (benchmarks/memory.py, 2048², 5 % gutter, 2 cores, docs/real_levels.md): the texel
-# histogram at 1M photons peaks at 122 bytes a texel (348 before the tiles and the cuts that came
-# with them; its positions and normals are set aside while it traces and while OIDN runs); the
+# Measured (benchmarks/memory.py, 2048², 5 % gutter, 2 cores; benchmarks/measured/memory.json): the
+# texel histogram at 1M photons peaks at 106 bytes a texel (348 before the tiles and the cuts that
+# came with them; its positions and normals are set aside from tracing to the last image); the
 # estimate (each part at its own peak, summed) says 240.
 DENOISE_PIXEL_BYTES = 3 * 12 + 6
 # --directional (lightmap/sh.py): nine more channels a texel: the estimator's float64 sums and the
@@ -102,13 +102,14 @@ class Estimate:
 
 def estimate(pixels: int, estimator_bytes: dict, batch: int, per_photon_all: float, per_photon_kept: float,
              threads: int, stored_hits: int = 0, geometry_bytes: int = 0, denoised_pixels: int = 0,
-             directional: bool = False, shadowmask: bool = False) -> Estimate:
+             directional: bool = False, shadowmask: bool = False, probe_bytes: int = 0) -> Estimate:
     """pixels: the lightmaps' pixels (an upper bound on texels, and on the estimators' sites,
     sites.py, which leave them about half the texels of a large lightmap); estimator_bytes: {name:
     bytes per texel}; batch: photons per batch; per_photon_all / per_photon_kept: segments a photon
     makes / hands to the estimator; stored_hits: hits the photon map keeps; denoised_pixels: the largest
     lightmap's pixels when lightmaps are denoised (one at a time), else 0; directional: L1 is baked
-    too (DIRECTIONAL_BYTES a pixel)."""
+    too (DIRECTIONAL_BYTES a pixel); probe_bytes: the light probes' records and their gather's
+    scratch (probes/placement.cost)."""
     parts = {
         "texels": pixels * TEXEL_BYTES,
         "lightmap images": pixels * PIXEL_BYTES,
@@ -124,6 +125,8 @@ def estimate(pixels: int, estimator_bytes: dict, batch: int, per_photon_all: flo
         parts["directional maps"] = pixels * DIRECTIONAL_BYTES
     if shadowmask:
         parts["shadowmask"] = pixels * SHADOWMASK_BYTES
+    if probe_bytes:
+        parts["light probes"] = int(probe_bytes)
     if stored_hits:
         parts["photon map hits"] = stored_hits * HIT_BYTES
     if denoised_pixels:
@@ -219,7 +222,7 @@ def reset_peak() -> None:
         pass
 
 
-def check(scene, settings, names, batch, per_photon, per_photon_kept) -> Estimate:
+def check(scene, settings, names, batch, per_photon, per_photon_kept, probe_bytes: int = 0) -> Estimate:
     """The bake's peak memory, estimated before any work; over the budget (the setting, else 80 %
     of what the system has free) it is a BakeError that says what to lower."""
     # One image per lightmap: an atlas's objects share theirs (each carries the atlas's resolution).
@@ -232,7 +235,7 @@ def check(scene, settings, names, batch, per_photon, per_photon_kept) -> Estimat
     denoised = max(sizes, default=0) if settings.denoise and denoise_mod.available() else 0
     need = estimate(pixels, per_texel, batch, per_photon, per_photon_kept,
                            settings.threads or os.cpu_count() or 1, hits, geometry, denoised,
-                           settings.directional != "none", bool(settings.shadowmask))
+                           settings.directional != "none", bool(settings.shadowmask), probe_bytes)
     budget = settings.memory_budget_mb * 1e6 if settings.memory_budget_mb else 0.8 * available_bytes()
     if budget and need.total > budget:
         advice = []

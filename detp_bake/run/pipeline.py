@@ -3,10 +3,16 @@ shares (its admitted settings, the centred scene, the photon budget, progress an
 stage takes what it reads and returns what it made, so a stage's signature is its contract:
 
     lay_out(reach_of)                    -> Layout      texels, validity, sites, discs, the tracer
+    plan_denoising(lay)                  -> Denoising   regions and fragments (finishing.plan)
     direct_light(lay)                    -> Direct      shadow rays (with direct='sampled')
     build_estimators(lay)                -> Estimation  the discs' clearance, each estimator
     trace(lay, light, est)               -> Traced      photon batches until a stop, sums handed over
-    results(lay, light, est, traced)     -> {estimator: BakeResult}
+    results(lay, plan, light, est, traced) -> {estimator: BakeResult}
+    probes(lay, result)                  -> [ProbeGrid], report   light probes from the finished lightmaps
+
+Everything that reads the texels' positions and normals runs before `trace` (or, for the disc
+estimators, before their `finish`); from there to the end of `results` they are set aside (48
+bytes a texel: texels.geometry_set_aside), once.
 
 The settings were checked at the door (door.py) before the scene was exported; here they are taken
 as they come, with the photon count chosen once.
@@ -18,7 +24,7 @@ import os
 import time
 from dataclasses import dataclass, field, replace
 from functools import partial
-from typing import Callable, Optional
+from typing import Optional
 
 import numpy as np
 
@@ -30,12 +36,13 @@ from ..lightmap import denoise as denoise_mod, fragments as fragments_mod, sites
     texels as texels_mod, validity
 from ..lightmap.noise import MIN_GROUPS, BatchNoise
 from ..options import PHOTONS_PER_TEXEL
+from ..probes import baking as probes_mod, placement
 from ..rays import RayCaster
 from ..transport import direct as direct_mod, frame_direct
 from ..transport.photons import PhotonTracer
 from . import directional as directional_mod, door, memory
 from .batches import Totals, TraceJob, blocks, trace_batches, worker_bytes
-from .finishing import Finishing
+from .finishing import Denoising, Finishing, plan as plan_denoising
 from .layout_warnings import layout_warnings
 from .results import BakeResult, Progress, RawImages, Snapshot, cancel_fn, si
 from .settings import BakeSettings
@@ -85,12 +92,13 @@ class Estimation:
     radius: Optional[np.ndarray]
     expected_segments: int
     clearance_seconds: float
+    layout_warnings: dict = field(default_factory=dict)
 
 
 @dataclass
 class Traced:
     """How tracing ended ("photons", "user", "time_limit", "target_noise"), the noise read last,
-    and what tracing set aside (the texels' geometry: closed when the results need it back)."""
+    and what tracing set aside (the texels' geometry: closed once the results are made)."""
     stopped_by: str
     current: dict
     aside: contextlib.ExitStack
@@ -105,6 +113,8 @@ class Pipeline:
         admitted = door.with_photons(door.admitted(settings, names, frame_state=frame_state), scene)
         self.names = list(admitted.names)
         scene.check()
+        # Probes are placed in world space, before the scene is centred: a bad grid is refused here.
+        self.grids = placement.grids_for(scene, admitted.settings.probes, admitted.settings.probe_spacing)
         directional_mod.check_shadowmask(admitted.settings, scene, frame_state)
         self.settings = settings = wide(admitted.settings)
         self.scene, self.offset = scene.recentred()  # float32 rays and discs work near the origin (scene.py)
@@ -130,14 +140,20 @@ class Pipeline:
                                                  f"texels ({PHOTONS_PER_TEXEL} a texel; set them with --photons); "
                                                  f"tracing them should take about {expect:.2g} s on {self.threads} "
                                                  "threads"))
-        self.need = memory.check(scene, settings, self.names, self.batch_size, per_photon, self.per_photon_kept)
+        self.need = memory.check(scene, settings, self.names, self.batch_size, per_photon, self.per_photon_kept,
+                                 placement.cost(self.grids, len(settings.shadowmask))[1])
 
     def run(self, reach_of=None) -> dict:
         lay = self.lay_out(reach_of)
+        plan = self.plan_denoising(lay)
         light = self.direct_light(lay)
         est = self.build_estimators(lay)
         traced = self.trace(lay, light, est)
-        return self.results(lay, light, est, traced)
+        results = self.results(lay, plan, light, est, traced)
+        if self.grids:
+            primary = results[self.names[0]]
+            primary.probes, primary.probe_info = self.probes(lay, primary)
+        return results
 
     def check_cancel(self, fraction=None) -> None:
         if self.cancelled():
@@ -173,6 +189,17 @@ class Pipeline:
         tracer = PhotonTracer(scene, settings.photons, self.bounces, settings.seed, self.batch_size,
                               settings.threads, indirect_only=self.sampled, caster=caster, margin=reach)
         return Layout(texels, caster, sites, at, discs, radius, reach, tracer, seconds)
+
+    def plan_denoising(self, lay: Layout) -> Denoising:
+        """The regions the denoiser keeps apart and the fragments it leaves to a mean over their
+        neighbours (finishing.plan); nothing without denoising."""
+        if not (self.settings.denoise and denoise_mod.available()):
+            return Denoising()
+        self.report(Progress("prepare", 0.0, "Finding the denoiser's regions and fragments"))
+        plan = plan_denoising(lay.texels, self.scene, lay.caster, self.threads, self.settings.photons)
+        lay.seconds["validity"] += plan.seconds["regions"]
+        lay.seconds["fragments"] = plan.seconds["fragments"]
+        return plan
 
     def direct_light(self, lay: Layout) -> Direct:
         """Direct light by shadow rays (with direct='sampled'); the sharp lights' part apart when the
@@ -230,8 +257,10 @@ class Pipeline:
             build[name] = time.perf_counter() - t1
         # Noise from the spread between blocks of batches, for the estimators that stream.
         noise = {name: BatchNoise(len(at)) for name, est in runs.items() if est.streaming}
+        warned = {name: layout_warnings(at, settings.estimator_settings, radius if run.discs else None)
+                  for name, run in runs.items()}
         return Estimation(runs, build, {name: 0.0 for name in self.names}, noise, context, radius, expected,
-                          clearance_seconds)
+                          clearance_seconds, warned)
 
     def trace(self, lay: Layout, light: Direct, est: Estimation) -> Traced:
         """Trace batch by batch until the photons are spent or a stop (the user's, the time limit,
@@ -239,7 +268,7 @@ class Pipeline:
         tracer, noise = lay.tracer, est.noise
         primary, total = self.names[0], tracer.photons
         direct_at = None if light.e is None else lay.sites.of_sites(light.e)
-        traced = Traced("photons", {}, contextlib.ExitStack())  # its aside is closed by `_geometry_back`
+        traced = Traced("photons", {}, contextlib.ExitStack())  # its aside is closed by `results`
         totals = Totals(self.names)
         shown = [0]
 
@@ -250,7 +279,8 @@ class Pipeline:
                 message += f" · noise {100 * max(traced.current.values(), default=0.0):.2g} %"
             self.report(Progress("trace", photons / total, message))
 
-        traced.aside.enter_context(self._aside_while_tracing(lay))
+        if self._geometry_may_go(lay, while_tracing=True):
+            traced.aside.enter_context(texels_mod.geometry_set_aside(lay.texels, self.scene))
         with contextlib.closing(iter(self._partials(lay, est, trace_progress))) as partials:
             for part in partials:
                 totals.add(part)
@@ -272,14 +302,30 @@ class Pipeline:
             est.spent[name] += totals.seconds[name]
         return traced
 
-    def results(self, lay: Layout, light: Direct, est: Estimation, traced: Traced) -> dict:
-        """Each estimator's lightmaps, denoised by region and with the fragments smoothed."""
+    def results(self, lay: Layout, plan: Denoising, light: Direct, est: Estimation, traced: Traced) -> dict:
+        """Each estimator's lightmaps, denoised by region and with the fragments smoothed; then the
+        texels' geometry back where tracing set it aside."""
         self.estimate_progress(0.0)
-        ending = _Ending(lay, traced, self._fragments(lay, traced))
-        results = {name: self._result(name, lay, light, est, ending) for name in self.names}
+        fragments_mod.set_passes(plan.fragments, traced.current)  # as many means as the noise asks
+        with traced.aside:
+            results = {name: self._result(name, lay, plan, light, est, traced) for name in self.names}
         if self.offset.any():
             lay.texels.position += self.offset  # back where the texels are, in world space
         return results
+
+    def probes(self, lay: Layout, result: BakeResult) -> tuple[list, dict]:
+        """The light probes (probes/), gathered from the primary estimator's finished lightmaps; the
+        shadowmask lights' direct light apart, as in the lightmaps."""
+        settings = self.settings
+
+        def probe_progress(fraction):
+            self.check_cancel()
+            self.report(Progress("probes", fraction, f"Light probes {100 * fraction:.0f} %"))
+        info = probes_mod.bake_probes(self.grids, self.scene, lay.caster, result.images, settings.probe_rays,
+                                      settings.direct_samples, settings.seed, settings.shadowmask, self.offset,
+                                      probe_progress, leave_out=settings.shadowmask_mode == "subtract")
+        result.seconds["probes"] = info["seconds"]
+        return self.grids, info
 
     # Tracing's helpers ----------------------------------------------------------------------------
     def _partials(self, lay: Layout, est: Estimation, trace_progress):
@@ -302,13 +348,15 @@ class Pipeline:
         return self.cluster.partials(job, runs_of_batches, self.cancelled, trace_progress,
                                      worker_bytes(self.need, lay.at, est.runs, runs_of_batches))
 
-    def _aside_while_tracing(self, lay: Layout):
-        """The texels' positions and normals set aside while tracing when no estimator reads them
-        then and the tracing is this process's own (48 bytes a texel: texels.geometry_set_aside)."""
-        if self.cluster is None and self.frame_state is None and not any(
-                estimators.get(name).texel_geometry_while_tracing for name in self.names):
-            return texels_mod.geometry_set_aside(lay.texels, self.scene)
-        return contextlib.nullcontext()
+    def _geometry_may_go(self, lay: Layout, while_tracing: bool) -> bool:
+        """Whether the texels' positions and normals may be set aside (48 bytes a texel:
+        texels.geometry_set_aside) now, once: while tracing, only when the tracing is this process's
+        own, not a frame of a range, and no estimator reads them then (the disc estimators do, until
+        their `finish`)."""
+        if lay.texels.position is None:
+            return False
+        return not while_tracing or (self.cluster is None and self.frame_state is None and not any(
+            estimators.get(name).texel_geometry_while_tracing for name in self.names))
 
     def _show(self, lay: Layout, light: Direct, est: Estimation, traced: Traced, totals, share) -> None:
         """The live preview of the primary estimator's lightmaps so far, when one is asked."""
@@ -335,43 +383,14 @@ class Pipeline:
         return "photons"
 
     # The results' helpers ---------------------------------------------------------------------------
-    def _fragments(self, lay: Layout, traced: Traced) -> Optional[Callable]:
-        """Texels of charts too narrow for OIDN take their neighbours' mean on the surface (fragments.py),
-        found lightmap by lightmap as each is denoised, and so do all texels of a lightmap whose
-        measured noise is over fragments.STARVED (the noisier, the wider); a comparison's estimators share them (one bake
-        keeps none after its lightmap is done). None without denoising."""
-        if not self.settings.denoise:
-            return None
-        find = partial(fragments_mod.find, lay.texels, scene=self.scene, caster=lay.caster, threads=self.threads,
-                       noise=dict(traced.current))
-        if len(self.names) == 1:
-            return find
-        found = {}
-        return lambda lm: found[lm.name] if lm.name in found else found.setdefault(lm.name, find(lm))
-
-    def _geometry_back(self, lay: Layout, ending: "_Ending") -> None:
-        """The texels' positions and normals back where tracing set them aside (they stay aside
-        until the first estimator's E/π is made: 48 bytes a texel less then), and the regions
-        the denoiser keeps apart found: texels a wall separates (validity.regions), in lightmaps
-        that have cuts, and the objects of an atlas (validity.by_object)."""
-        ending.traced.aside.close()
-        if ending.regions is not None:
-            return
-        denoise, texels, scene = self.settings.denoise, lay.texels, self.scene
-        t1 = time.perf_counter()
-        regions = {lm.name: validity.regions(texels, lm, texels.cuts, lay.caster, scene)
-                   for lm in texels.lightmaps if denoise and (texels.cuts.of[lm.texels] >= 0).any()}
-        for lm in texels.lightmaps:
-            if denoise and len(lm.members) > 1:
-                regions[lm.name] = validity.by_object(texels, lm, scene, regions.get(lm.name))
-        ending.regions = regions
-        lay.seconds["validity"] += time.perf_counter() - t1
-
-    def _result(self, name, lay: Layout, light: Direct, est: Estimation, ending: "_Ending") -> BakeResult:
+    def _result(self, name, lay: Layout, plan: Denoising, light: Direct, est: Estimation,
+                traced: Traced) -> BakeResult:
         share, sites = lay.tracer.share, lay.sites
         run = est.runs[name]
         t1 = time.perf_counter()
         out = run.finish()
+        if name == self.names[-1] and self._geometry_may_go(lay, while_tracing=False):
+            traced.aside.enter_context(texels_mod.geometry_set_aside(lay.texels, self.scene))  # the last read done
         # The estimator's per-texel state goes before the images are made: the class still
         # answers what the rest of the loop asks (streaming, discs, stores_hits, fixed_noise).
         est.runs[name] = kind = type(run)
@@ -388,31 +407,29 @@ class Pipeline:
         if noise is not None:  # (relative noise, why there is none)
             measured = noise.relative(lay.at.lightmaps, partial(_luminance, sites.of_sites(value), np.pi))
             noise = measured, "" if measured else noise.unmeasured(lay.tracer.stats.photons)
-        self._geometry_back(lay, ending)
-        result = self._images(name, kind, lay, light, value, out.counters, seconds, ending, last=l1 is None)
+        result = self._images(name, kind, lay, plan, light, value, out.counters, seconds, last=l1 is None)
         out = value = None
         if light.mask is not None:
             directional_mod.shadowmask_images(result, light.mask)
         if l1 is not None:
             t2 = time.perf_counter()
             sharp_part = None if light.sharp_l1 is None else (light.sharp, light.sharp_l1)
-            directional_mod.make_images(result, l1, ending.regions, ending.fragments_of, sharp_part)
+            directional_mod.make_images(result, l1, plan, sharp_part)
             result.seconds["directional"] = time.perf_counter() - t2
-        result.stopped_by, result.share = ending.traced.stopped_by, share
+        result.stopped_by, result.share = traced.stopped_by, share
         result.export = dict(getattr(self.scene, "export_stats", None) or {})
         result.cluster = dict(self.cluster.last) if self.cluster is not None else {}
         self._report_noise(kind, result, noise, lay, est)
         return result
 
-    def _images(self, name, kind, lay: Layout, light: Direct, value, counters, seconds, ending, last) -> BakeResult:
+    def _images(self, name, kind, lay: Layout, plan: Denoising, light: Direct, value, counters, seconds,
+                last) -> BakeResult:
         """Estimator `name`'s images (finishing.py) as a BakeResult. An estimate with white noise is
         denoised apart from the direct light (denoise.py); the last estimator of a plain bake (`last`:
         no L1 after it) hands the direct light over, as nothing after it reads it."""
         settings = replace(self.settings, estimator=name)
         apart = light.e is not None and kind.for_denoiser
-        job = Finishing(settings, lay.texels, light.e if apart else None, light.sharp if apart else None,
-                        ending.regions, ending.fragments_of, partial(texels_mod.geometry_set_aside, lay.texels,
-                                                                     self.scene))
+        job = Finishing(settings, lay.texels, light.e if apart else None, light.sharp if apart else None, plan)
         if name == self.names[-1] and last:
             light.e = None
         made = job.images(value, counters)
@@ -439,8 +456,8 @@ class Pipeline:
             result.noise = {lm.name: fixed for lm in lay.texels.lightmaps}
             result.noise_unit = "per cent of each texel's own value (fixed by k)"
         else:
-            result.noise_unmeasured = f"the {settings.estimator} estimator's noise is not read off its batches"
-        result.warnings.extend(layout_warnings(at, settings.estimator_settings, est.radius if kind.discs else None))
+            result.noise_unmeasured = f"the {result.settings.estimator} estimator's noise is not read off its batches"
+        result.warnings.extend(est.layout_warnings[result.settings.estimator])
         result.direct["indirect_spacing"] = lay.sites.spacing
         result.direct["indirect_sites"] = len(at)
         k = settings.estimator_settings.k
@@ -452,16 +469,6 @@ class Pipeline:
         result.memory = {"estimate_mb": round(need.total / 1e6, 1),
                          "parts_mb": {k: round(v / 1e6, 1) for k, v in need.parts.items()},
                          "peak_mb": round(memory.peak_bytes() / 1e6, 1), "batch_photons": self.batch_size}
-
-
-@dataclass
-class _Ending:
-    """What the results share across estimators: how tracing ended, the denoiser's regions (found
-    once the texels' geometry is back) and the fragments' finder."""
-    lay: Layout
-    traced: Traced
-    fragments_of: Optional[Callable]
-    regions: Optional[dict] = None
 
 
 def wide(settings: BakeSettings) -> BakeSettings:

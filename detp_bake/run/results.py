@@ -92,6 +92,11 @@ class BakeResult:
     keys: dict = field(default_factory=dict)
     reused: dict = field(default_factory=dict)
     earlier: list = field(default_factory=list)
+    # Light probes (probes/): the grids baked with this result (the primary estimator's), and what
+    # report.json says of them (count, invalid, moved, seconds)
+    probes: list = field(default_factory=list)
+    probe_info: dict = field(default_factory=dict)
+    probe_file: str = ""  # where writing.py put them
 
     def noise_percent(self) -> dict:
         """{lightmap name: noise in per cent, or None where it was not measured}, for JSON."""
@@ -159,6 +164,7 @@ class BakeResult:
             **({"directional": self.directional} if self.directional else {}),
             **({"shadowmask": self.shadowmask} if self.shadowmask else {}),
             **({"cluster": self.cluster} if self.cluster else {}),
+            **({"probes": {**self.probe_info, "file": self.probe_file}} if self.probe_info else {}),
             "warnings": list(self.warnings),
             "seconds": self.seconds,
         }

@@ -30,6 +30,11 @@ class BakeSettings:
     seed: int = default("seed")
     resolution: int = default("resolution")  # default per-object lightmap size (objects may override)
     margin: int = default("margin")  # dilation, pixels
+    # Light probes (probes/): off, an automatic grid at probe_spacing metres, or the scene's Light
+    # Probe Volumes; probe_rays gather rays per probe.
+    probes: str = default("probes")
+    probe_spacing: float = default("probe_spacing")
+    probe_rays: int = default("probe_rays")
     # Atlases (lightmap/atlas.py): the Blender export packs the charts; the bake sees objects that
     # share an image (BakeObject.image).
     lightmaps: str = default("lightmaps")

@@ -69,7 +69,8 @@ def warm_up(threads: int = 0, cancel=None) -> float:
     t0 = time.perf_counter()
     for direct in options.DIRECT_MODES:
         settings = bake.BakeSettings(photons=4000, resolution=8, direct=direct, direct_samples=2, denoise=False,
-                                     threads=threads, batch_size=1000)
+                                     threads=threads, batch_size=1000, probe_spacing=0.5, probe_rays=16,
+                                     probes="auto" if direct == "sampled" else "off")  # the probes' kernels too
         bake.compute_many(_box(), settings, estimators.names(), cancel=cancel)
     return time.perf_counter() - t0
 

@@ -12,6 +12,7 @@ from typing import Callable, Optional
 from .. import __version__
 from ..errors import BakeCancelled, BakeError
 from ..lightmap import images, staging
+from ..probes import grid as probe_grid
 from .results import BakeResult, Progress, cancel_fn
 
 
@@ -91,6 +92,12 @@ def write_many(results: dict, out_dir: str | os.PathLike, progress: Optional[Cal
                     report(Progress("write", done / max(count, 1), f"Writing {name}"))
             for estimator, result in results.items():
                 result.files = {name: [str(p) for p in targets] for name, targets in paths[estimator].items()}
+            for result in results.values():
+                if result.probes:  # probes.npz, or probes.<frame>.npz for a frame of a range
+                    stem, suffix = probe_grid.FILE_NAME.rsplit(".", 1)
+                    name = f"{stem}{number}.{suffix}"
+                    files.stage(name, lambda tmp, grids=result.probes: probe_grid.save(grids, tmp))
+                    result.probe_file = str(out / name)
             for name, write_file in (extra or {}).items():  # these may read the results' files
                 files.stage(name, write_file)
             seconds = time.perf_counter() - t0
