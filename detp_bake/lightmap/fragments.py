@@ -45,7 +45,7 @@ SIGMA = 1.5  # the Gaussian's width, texel sizes; neighbours beyond 3 SIGMA are 
 COS = 0.9  # shading normals at least this aligned count as one surface
 PASS_NOISE = 0.33  # relative noise (noise.py) up to which fragments take one weighted mean (passes_for)
 MAX_PASSES = 32  # the most weighted means taken in turn: each widens the kernel along the surface
-STARVED_PHOTONS = 4.0  # photons a texel (by area) under which a lightmap's charts up to STARVED_WIDTH skip OIDN
+STARVED_PHOTONS = 8.0  # photons a texel (by area) under which a lightmap's charts up to STARVED_WIDTH skip OIDN
 STARVED_WIDTH = 32.0  # texels: a starved lightmap's charts narrower than this skip OIDN (wider ones it still
 # cleans best: a 64-texel plane at 10 photons a texel, 7.9 % per texel by OIDN, 10.5 % smoothed)
 LIFT = 0.25  # texel sizes: rays between neighbours pass this far above the surface (over a convex curve's chord)
