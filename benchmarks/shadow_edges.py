@@ -96,10 +96,12 @@ def main(argv=None):
                "rest_error": error(r.images, ref, rest), "all_error": error(r.images, ref, masks),
                "mean": float(np.mean(np.concatenate([r.images[n][masks[n]].ravel() for n in names]))
                              / np.mean(np.concatenate([ref[n][masks[n]].ravel() for n in names])) - 1.0)}
+        row["objects"] = {n: round(error({n: r.images[n]}, ref, {n: edge[n]}), 4) for n in names if edge[n].any()}
         rows.append(row)
         print(f"{samples:4d} rays: edge texels {row['edge_texels']:5d} error {100 * row['edge_error']:6.2f} %, "
               f"others {100 * row['rest_error']:6.2f} %, all {100 * row['all_error']:6.2f} %, "
-              f"mean {100 * row['mean']:+.2f} %, {seconds:.1f} s", flush=True)
+              f"mean {100 * row['mean']:+.2f} %, {seconds:.1f} s; edges by object: "
+              + ", ".join(f"{n} {100 * v:.1f} %" for n, v in row["objects"].items()), flush=True)
     doc = {"resolution": res, "reference_spp": args.reference_spp, "sun_angle": args.sun_angle, "code": args.code,
            "rows": rows}
     out = Path(args.json)
