@@ -4,7 +4,9 @@ classic two-pass split; docs/design.md, Denoising).
 Direct light holds the hard shadows and most of the energy, and a density estimate blurs it over its
 disc. Sampled here, it has no blur at all. Each ray starts at its own point of the texel's middle,
 as Cycles' bake jitters a texel (texel_area.py): a point light or a sharp sun takes FIRST_SAMPLES
-rays per texel and `samples` more where those disagree (a shadow edge or a spot's rim in the texel),
+rays per texel, from the corners of its square (texel_area.probe_point: no straight edge crossing
+it goes unseen), and where those disagree (a shadow edge or a spot's rim in the texel) `samples`
+more, stratified over the square, which alone give its value;
 a light with extent `samples` stratified rays (a Hammersley set, rotated per texel and light by a
 random offset so neighbouring texels do not share a pattern). A texel's random numbers are keyed by
 what it is (its object's name and its pixel: `texel_ids`), not by its place among the texels baked,
