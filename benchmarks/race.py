@@ -5,7 +5,7 @@ Cycles + OIDN takes to reach the same error.
 
     python benchmarks/race.py [--scene living_room] [--resolution 128] [--photons 0,1e6,2e6,4e6,8e6]
         [--spp 4,8,16,32,64] [--reference-spp 512] [--reference FILE.npz] [--code DIR ...]
-        [--json OUT]
+        [--json OUT] [--record]
 
 The scene is one of sample_scenes/downloaded/ (or a .blend path). Its meshes get the Lightmap UVs
 the bake makes (xatlas), saved once into a work file that every side then reads. The reference,
@@ -128,6 +128,7 @@ def main(argv=None):
     ap.add_argument("--code", action="append", default=[])
     ap.add_argument("--leave-out", default=LAMP, help="objects left out of the error (comma-separated)")
     ap.add_argument("--json", default=str(ROOT / "benchmarks" / "results" / "race.json"))
+    ap.add_argument("--record", action="store_true", help="also into benchmarks/measured/race.json (measured.py)")
     ap.add_argument("--worker", default="", help=argparse.SUPPRESS)
     ap.add_argument("--blend", default="", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -185,11 +186,15 @@ def main(argv=None):
                   flush=True)
     doc = {"scene": args.scene, "resolution": args.resolution, "reference_spp": args.reference_spp,
            "cores": os.cpu_count(), "blender": ".".join(map(str, bpy.app.version)), "objects": sorted(masks), "left_out": sorted(set(names) - set(masks)),
-           "rows": rows}
+           "codes": codes, "rows": rows}
     out = Path(args.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(doc, indent=1))
     print(f"wrote {out}")
+    if args.record:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        import measured
+        print(f"recorded {measured.record('race', doc)}")
     return doc
 
 
