@@ -91,6 +91,26 @@ def _memory_sentence(d: dict) -> str:
                       f"{m['cores']} cores, commit {m['commit']}): " + "; ".join(said) + ".")
 
 
+def _race_table(d: dict) -> str:
+    """benchmarks/race.py's rows: ours per photon count, the first checkout (before) beside the last
+    (after), then Cycles + OIDN per sample count."""
+    codes = d["codes"]
+    ours = {code: {r["asked"]: r for r in d["rows"] if r.get("code") == code} for code in codes}
+    first, last = ours[codes[0]], ours[codes[-1]]
+    rows = ["| method | error before | seconds | error after | seconds |", "|---|---:|---:|---:|---:|"]
+    for asked in sorted(last, key=lambda a: (a == 0, a)):
+        a, b = first.get(asked), last[asked]
+        name = f"ours, automatic ({b['photons'] / 1e6:.2g}M)" if asked == 0 else f"ours, {asked / 1e6:.3g}M photons"
+        before = f"{100 * a['error']:.2f} % | {a['seconds']:.1f}" if a else "| "
+        rows.append(f"| {name} | {before} | {100 * b['error']:.2f} % | {b['seconds']:.1f} |")
+    for r in d["rows"]:
+        if r["method"].startswith("Cycles"):
+            rows.append(f"| {r['method']} | {100 * r['error']:.2f} % | {r['seconds']:.1f} | | |")
+    m = d["recorded"]
+    return "\n".join(rows) + (f"\n\n*{d['scene']} at {d['resolution']}² per object against Cycles at "
+                              f"{d['reference_spp']} samples; {m['cores']} cores; commit {m['commit']}, {m['date']}.*\n")
+
+
 def _paragraph(text: str) -> str:
     return textwrap.fill(text, width=96, break_on_hyphens=False) + "\n"
 
@@ -124,6 +144,7 @@ BLOCKS = {
     "memory.sentence": ("memory", _memory_sentence),
     "probes.estimators": ("probes", _probe_rows),
     "probes.cost": ("probes", _probe_cost),
+    "race.table": ("race", _race_table),
 }
 
 

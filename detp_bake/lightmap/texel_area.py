@@ -12,7 +12,9 @@ line up with the light's own Hammersley samples in bases 2 and 1/n), rotated per
 when it lies on the texel's triangle (Cycles mirrors it back onto the triangle). A point off the
 triangle (a texel at a chart's border, partly covered) is replaced by the next point of the
 sequence, a few times, then by the texel's own position: the rays stay on the covered part, so seams
-keep their values.
+keep their values. A light that adds rays only where a texel's first ones disagree (a point light or
+a sharp sun) starts those first ones at the square's corners (`probe_point`), so that no straight
+shadow edge crossing the square goes unseen.
 """
 from __future__ import annotations
 
@@ -24,6 +26,8 @@ from .validity import on_side
 
 TRIES = 8  # points tried per sample before the texel's own position is used
 SPAN = 0.5  # the square's width in texels: Cycles' bake jitter
+CORNER_INSET = 1.0 / 16.0  # probe_point's corners, this share of the square in from its edge
+PROBES = 4  # probe_point's corners
 
 
 @inline
@@ -70,6 +74,45 @@ def area_point(spread, i, j, samples, q0, q1, tri, cx, cy, sx, sy, cut_of, cut_p
                 if on_side(cut_of, cut_p, cut_n, i, px, py, pz):
                     return px, py, pz
     return pos[i, 0], pos[i, 1], pos[i, 2]
+
+
+@inline
+def _on_triangle(t, x, y, w, h, uvs, positions):
+    """(inside, px, py, pz): whether pixel point (x, y) lies on triangle t (lightmap UVs `uvs`, a
+    w × h lightmap), and its world position (world `positions`) when it does."""
+    ax, ay = uvs[t, 0, 0] * w, uvs[t, 0, 1] * h
+    bx, by = uvs[t, 1, 0] * w, uvs[t, 1, 1] * h
+    ex, ey = uvs[t, 2, 0] * w, uvs[t, 2, 1] * h
+    den = (by - ey) * (ax - ex) + (ex - bx) * (ay - ey)
+    if den == 0.0:
+        return False, 0.0, 0.0, 0.0
+    l0 = ((by - ey) * (x - ex) + (ex - bx) * (y - ey)) / den
+    l1 = ((ey - ay) * (x - ex) + (ax - ex) * (y - ey)) / den
+    l2 = 1.0 - l0 - l1
+    if l0 < 0.0 or l1 < 0.0 or l2 < 0.0:
+        return False, 0.0, 0.0, 0.0
+    return (True, l0 * positions[t, 0, 0] + l1 * positions[t, 1, 0] + l2 * positions[t, 2, 0],
+            l0 * positions[t, 0, 1] + l1 * positions[t, 1, 1] + l2 * positions[t, 2, 1],
+            l0 * positions[t, 0, 2] + l1 * positions[t, 1, 2] + l2 * positions[t, 2, 2])
+
+
+@inline
+def probe_point(spread, i, j, samples, q0, q1, tri, cx, cy, sx, sy, cut_of, cut_p, cut_n, uvs, positions, pos):
+    """Sample j (0 … 3) of a texel's first rays for a light that adds rays where they disagree:
+    corner j of the square SPAN wide round its centre, pulled in by CORNER_INSET. Any straight
+    shadow edge that crosses the square has corners on both sides of it, so four corner rays
+    see every such edge, where four points inside the square miss about half of them (a texel
+    whose first rays agree takes no more, whatever the ray count: its error would not fall with
+    more rays). A corner off the texel's triangle or cut falls back to area_point."""
+    if spread:
+        t = tri[i]
+        reach = 0.5 * SPAN * (1.0 - CORNER_INSET)
+        x = cx[i] + (reach if j % 2 == 1 else -reach)
+        y = cy[i] + (reach if (j // 2) % 2 == 1 else -reach)
+        inside, px, py, pz = _on_triangle(t, x, y, np.float64(sx[i]), np.float64(sy[i]), uvs, positions)
+        if inside and on_side(cut_of, cut_p, cut_n, i, px, py, pz):
+            return px, py, pz
+    return area_point(spread, i, j, samples, q0, q1, tri, cx, cy, sx, sy, cut_of, cut_p, cut_n, uvs, positions, pos)
 
 
 def texel_squares(texels, a: int = 0, b: int | None = None) -> tuple:

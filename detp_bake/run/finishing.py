@@ -36,8 +36,10 @@ class Denoising:
     seconds: dict = field(default_factory=dict)
 
 
-def plan(texels, scene, caster, threads: int) -> Denoising:
-    """The regions and fragments of every lightmap (Denoising), with the seconds each took."""
+def plan(texels, scene, caster, threads: int, photons: int = 0) -> Denoising:
+    """The regions and fragments of every lightmap (Denoising), with the seconds each took; with
+    `photons` (the bake's), a lightmap that can expect few a texel has its wider charts among its
+    fragments too (fragments.starved_lightmaps)."""
     out = Denoising()
     t0 = time.perf_counter()
     for lm in texels.lightmaps:
@@ -46,8 +48,9 @@ def plan(texels, scene, caster, threads: int) -> Denoising:
         if len(lm.members) > 1:
             out.regions[lm.name] = validity.by_object(texels, lm, scene, out.regions.get(lm.name))
     t1 = time.perf_counter()
-    out.fragments = {lm.name: fragments_mod.find(texels, lm, scene=scene, caster=caster, threads=threads)
-                     for lm in texels.lightmaps}
+    starved = fragments_mod.starved_lightmaps(texels, scene, photons)
+    out.fragments = {lm.name: fragments_mod.find(texels, lm, scene=scene, caster=caster, threads=threads,
+                                                 starved=lm.name in starved) for lm in texels.lightmaps}
     out.seconds = {"regions": t1 - t0, "fragments": time.perf_counter() - t1}
     return out
 

@@ -32,7 +32,8 @@ from .. import estimators, options
 from ..errors import BakeCancelled
 from ..estimators.discs import SLAB, capped_radius, disc_radius
 from ..estimators.rise import own_surface_rise, piece_extent, welded_pieces
-from ..lightmap import denoise as denoise_mod, sites as sites_mod, texels as texels_mod, validity
+from ..lightmap import denoise as denoise_mod, fragments as fragments_mod, sites as sites_mod, \
+    texels as texels_mod, validity
 from ..lightmap.noise import MIN_GROUPS, BatchNoise
 from ..options import PHOTONS_PER_TEXEL
 from ..probes import baking as probes_mod, placement
@@ -195,7 +196,7 @@ class Pipeline:
         if not (self.settings.denoise and denoise_mod.available()):
             return Denoising()
         self.report(Progress("prepare", 0.0, "Finding the denoiser's regions and fragments"))
-        plan = plan_denoising(lay.texels, self.scene, lay.caster, self.threads)
+        plan = plan_denoising(lay.texels, self.scene, lay.caster, self.threads, self.settings.photons)
         lay.seconds["validity"] += plan.seconds["regions"]
         lay.seconds["fragments"] = plan.seconds["fragments"]
         return plan
@@ -305,6 +306,7 @@ class Pipeline:
         """Each estimator's lightmaps, denoised by region and with the fragments smoothed; then the
         texels' geometry back where tracing set it aside."""
         self.estimate_progress(0.0)
+        fragments_mod.set_passes(plan.fragments, traced.current)  # as many means as the noise asks
         with traced.aside:
             results = {name: self._result(name, lay, plan, light, est, traced) for name in self.names}
         if self.offset.any():

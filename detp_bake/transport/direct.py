@@ -4,7 +4,9 @@ classic two-pass split; docs/design.md, Denoising).
 Direct light holds the hard shadows and most of the energy, and a density estimate blurs it over its
 disc. Sampled here, it has no blur at all. Each ray starts at its own point of the texel's middle,
 as Cycles' bake jitters a texel (texel_area.py): a point light or a sharp sun takes FIRST_SAMPLES
-rays per texel and `samples` more where those disagree (a shadow edge or a spot's rim in the texel),
+rays per texel, from the corners of its square (texel_area.probe_point: no straight edge crossing
+it goes unseen), and where those disagree (a shadow edge or a spot's rim in the texel) `samples`
+more, stratified over the square, which alone give its value;
 a light with extent `samples` stratified rays (a Hammersley set, rotated per texel and light by a
 random offset so neighbouring texels do not share a pattern). A texel's random numbers are keyed by
 what it is (its object's name and its pixel: `texel_ids`), not by its place among the texels baked,
@@ -49,7 +51,7 @@ from .environment import environment_rays
 from .scattering import MAX_PASSES
 from ..scene import Scene
 from .textures import opacity_at, surfaces
-from ..lightmap.texel_area import area_point, texel_squares
+from ..lightmap.texel_area import PROBES, area_point, probe_point, texel_squares
 from ..lightmap.texels import geometric_normals
 
 CHUNK = 2048  # texels per work item
@@ -60,14 +62,16 @@ DISAGREE = 0.05  # a sharp light adds rays where its first ones differ by more t
 @jit
 def _shadow_rays(kind, prm, j0, samples, stride, sel, counts, key, ids, a, b, pos, nrm, geo, eps,
                  cdf, tpos, tnrm, trad, spread, sq_tri, sq_cx, sq_cy, sq_w, sq_h, cut_of, cut_p, cut_n, uvs, positions,
-                 o, d, t, w, owner):
+                 o, d, t, w, owner, probe=False):
     """Rays for texels a … b−1 and one light: origins `o` (each at its own point of the texel's
     square: texel_area.py; offset along the geometric normal `geo`), unit directions `d`, far
     limits `t`, and `w` the RGB irradiance each adds when unoccluded (already divided by the sample
     count); `owner` the texel. Rays that cannot add anything (light behind the surface, outside a
     spot cone) are left out. Returns the ray count. Samples j0 … j0 + samples − 1 of `stride`, for
     the texels `sel` when it is not empty (a top-up: direct_lights); `counts`, when not empty, is
-    each texel's own number of samples instead (the light's share of them: light_shares)."""
+    each texel's own number of samples instead (the light's share of them: light_shares). `probe`:
+    samples 0 … PROBES − 1 start at the corners of the texel's square (texel_area.probe_point), for
+    a light that adds rays where its first ones disagree."""
     k = 0
     todo = sel.shape[0] if sel.shape[0] > 0 else b - a
     for q in range(todo):
@@ -81,8 +85,12 @@ def _shadow_rays(kind, prm, j0, samples, stride, sel, counts, key, ids, a, b, po
         state, r0, r1 = uniform2(photon_rng(key, ids[i]))
         state, q0, q1 = uniform2(state)
         for j in range(j0, j0 + samples):
-            px, py, pz = area_point(spread, i, j, stride, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h,
-                                    cut_of, cut_p, cut_n, uvs, positions, pos)
+            if probe and j < PROBES:
+                px, py, pz = probe_point(spread, i, j, stride, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h,
+                                         cut_of, cut_p, cut_n, uvs, positions, pos)
+            else:
+                px, py, pz = area_point(spread, i, j, stride, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h,
+                                        cut_of, cut_p, cut_n, uvs, positions, pos)
             ox, oy, oz = px + eps * gx, py + eps * gy, pz + eps * gz
             u0 = (j + 0.5) * inv_s + r0
             u0 -= math.floor(u0)
@@ -376,16 +384,17 @@ class _DirectWork:
         disagree = self.cast(index, at, buffers, light, key, 0, light.samples, _NONE, own[0], counts, own[1],
                              own[2])
         if light.extra:
-            # A shadow edge, a spot's rim or the light's horizon crosses the texel's middle.
+            # A shadow edge, a spot's rim or the light's horizon crosses the texel's middle: its
+            # corner probes disagree. Its value is then that of the added rays alone, stratified over
+            # the square (the corners, on the square's rim, would weigh its rim too much).
             mixed = np.flatnonzero(disagree)
             if mixed.size:
                 more = parts()
                 self.cast(index, at, buffers, light, key, light.samples, light.extra, mixed.astype(np.int64),
                           more[0], None, more[1], more[2])
-                n0, n1 = light.samples, light.extra
                 for mine, extra in zip(own, more):
                     if mine is not None:
-                        mine[mixed] = (n0 * mine[mixed] + n1 * extra[mixed]) / (n0 + n1)
+                        mine[mixed] = extra[mixed]
         return own
 
     def arrived(self, o, d, t) -> np.ndarray:
@@ -413,7 +422,8 @@ class _DirectWork:
                              ids, 0, n, pos, nrm, geo, self.eps,
                              light.tri_cdf if mesh else _EMPTY_CDF, light.tri_pos if mesh else _EMPTY_TRI,
                              light.tri_normal if mesh else _EMPTY_VEC, light.tri_radiance if mesh else _EMPTY_VEC,
-                             self.spread, *squares, self.uvs, self.positions, o, d, t, w, owner)
+                             self.spread, *squares, self.uvs, self.positions, o, d, t, w, owner,
+                             bool(light.extra) and j0 == 0)
         if k == 0:
             return np.zeros(n, bool) if light.extra else None
         if self.srf.cutout:

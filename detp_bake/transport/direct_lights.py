@@ -18,7 +18,7 @@ POINT, SUN, AREA, MESH, WORLD, WORLD_MAP = 0, 1, 2, 3, 4, 5
 # Point, spot and sun lights: exact away from penumbrae (every ray agrees), even with a radius or an
 # angle; area lights, emissive meshes and the world are noisy wherever they are partly hidden.
 SHARP_KINDS = (POINT, SUN)
-FIRST_SAMPLES = 4  # a point light's or sharp sun's first rays per texel, spread over its middle
+FIRST_SAMPLES = 4  # a point light's or sharp sun's first rays per texel, from its square's corners
 FAR = 1e37
 
 
