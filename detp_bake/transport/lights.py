@@ -10,8 +10,6 @@ footprint.py and environment.py); photon i draws its numbers from its own random
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
