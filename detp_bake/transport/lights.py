@@ -10,7 +10,6 @@ footprint.py and environment.py); photon i draws its numbers from its own random
 """
 from __future__ import annotations
 
-
 import numpy as np
 
 from ..sampling import (cone_lobe, cosine_hemisphere, cosine_lobe, in_frame, inline, jit, orthonormal_basis,
