@@ -67,6 +67,12 @@ def chart_widths(uv: np.ndarray, positions: np.ndarray, res: int) -> tuple[np.nd
     u = np.asarray(uv, np.float64)
     corner = _corners(u, positions)
     count, chart = chart_of_triangles(uv, positions, corner)
+    return chart, _uv_widths(u, corner, chart, count) * res
+
+
+def _uv_widths(u: np.ndarray, corner: np.ndarray, chart: np.ndarray, count: int) -> np.ndarray:
+    """(count,) each chart's width in UV units, 4·area / perimeter, from the triangles' float64 UVs
+    (T, 3, 2), corner ids (T, 3) and charts (T,)."""
     area = 0.5 * np.abs((u[:, 1, 0] - u[:, 0, 0]) * (u[:, 2, 1] - u[:, 0, 1])
                         - (u[:, 1, 1] - u[:, 0, 1]) * (u[:, 2, 0] - u[:, 0, 0]))
     edges = np.sort(np.stack([corner[:, [0, 1]], corner[:, [1, 2]], corner[:, [2, 0]]], axis=1), axis=2).reshape(-1, 2)
@@ -75,7 +81,7 @@ def chart_widths(uv: np.ndarray, positions: np.ndarray, res: int) -> tuple[np.nd
     _, first, times = _rows(edges)
     outer = first[times == 1]  # an edge no other triangle shares lies on its chart's outline
     perimeter = np.bincount(np.repeat(chart, 3)[outer], weights=length[outer], minlength=count)
-    return chart, 4.0 * np.bincount(chart, weights=area, minlength=count) / np.maximum(perimeter, 1e-300) * res
+    return 4.0 * np.bincount(chart, weights=area, minlength=count) / np.maximum(perimeter, 1e-300)
 
 
 def widths_of_objects(uv: np.ndarray, positions: np.ndarray, bounds, res) -> list:
@@ -107,15 +113,7 @@ def widths_of_objects(uv: np.ndarray, positions: np.ndarray, bounds, res) -> lis
     _, chart = np.unique(obj * (int(chart.max(initial=0)) + 1) + chart, return_inverse=True)
     chart = chart.reshape(-1)
     count = int(chart.max(initial=-1)) + 1
-    area = 0.5 * np.abs((u[:, 1, 0] - u[:, 0, 0]) * (u[:, 2, 1] - u[:, 0, 1])
-                        - (u[:, 1, 1] - u[:, 0, 1]) * (u[:, 2, 0] - u[:, 0, 0]))
-    edges = np.sort(np.stack([corner[:, [0, 1]], corner[:, [1, 2]], corner[:, [2, 0]]], axis=1), axis=2).reshape(-1, 2)
-    length = np.linalg.norm(np.stack([u[:, 1] - u[:, 0], u[:, 2] - u[:, 1], u[:, 0] - u[:, 2]], axis=1),
-                            axis=2).reshape(-1)
-    _, first, times = _rows(edges)
-    outer = first[times == 1]
-    perimeter = np.bincount(np.repeat(chart, 3)[outer], weights=length[outer], minlength=count)
-    width = 4.0 * np.bincount(chart, weights=area, minlength=count) / np.maximum(perimeter, 1e-300)
+    width = _uv_widths(u, corner, chart, count)
     tstart = np.cumsum(counts) - counts
     full = counts > 0
     first_chart = np.append(np.minimum.reduceat(chart, tstart[full]), count)  # each object's charts: a run
