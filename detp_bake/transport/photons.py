@@ -340,21 +340,31 @@ class PhotonTracer:
 
     def batches(self, cancel: Optional[Callable[[], bool]] = None,
                 indices: Optional[range] = None) -> Iterator[PhotonBatch]:
-        """The batches in order, or batches `indices` (a range of batch numbers) only."""
+        """The batches in order, or batches `indices` (a range of batch numbers) only. With several
+        threads the next batch is traced while the caller works through this one (an estimator's
+        `add` runs on one core): the batches are the same, one more is held."""
         if self._caster is None:
             self._caster = self._shared_caster or RayCaster(self.scene.positions)
+        order = list(range(self.batch_count) if indices is None else indices)
+        ahead = None
         if self.threads > 1:
             self._pool = ThreadPoolExecutor(self.threads)
+            ahead = ThreadPoolExecutor(1) if len(order) > 1 else None
+        pending = None
         try:
-            for index in range(self.batch_count) if indices is None else indices:
+            for n, index in enumerate(order):
                 if cancel is not None and cancel():
                     raise BakeCancelled()
-                t0 = time.perf_counter()
-                batch = self._trace_batch(index)
-                self.stats.seconds += time.perf_counter() - t0
+                traced = pending.result() if pending is not None else self._timed_batch(index)
+                pending = ahead.submit(self._timed_batch, order[n + 1]) if ahead and n + 1 < len(order) else None
+                self._count(*traced)
                 self.batches_done = index + 1
-                yield batch
+                yield traced[0]
         finally:
+            if pending is not None:
+                pending.cancel() or pending.exception()  # a batch under way ends before its buffers go
+            if ahead is not None:
+                ahead.shutdown()
             if self._pool is not None:
                 self._pool.shutdown(cancel_futures=True)
                 self._pool = None
@@ -430,7 +440,14 @@ class PhotonTracer:
         st.cut += b - a  # the last ones stay where they landed, as if the surface were opaque
         return b
 
-    def _trace_batch(self, index: int) -> PhotonBatch:
+    def _timed_batch(self, index: int) -> tuple:
+        """Batch `index` traced (`_trace_batch`), with the seconds it took."""
+        t0 = time.perf_counter()
+        batch, per_stream = self._trace_batch(index)
+        return batch, per_stream, time.perf_counter() - t0, index
+
+    def _trace_batch(self, index: int) -> tuple[PhotonBatch, list]:
+        """Batch `index` traced, its streams on the pool's threads; with its streams' counts (`_count`)."""
         start, stop = self.schedule.ids(index)
         n = stop - start
         bounds = self.stream_bounds(n)
@@ -444,8 +461,16 @@ class PhotonTracer:
             for j in [self._pool.submit(self._trace_stream, *job) for job in jobs]:
                 j.result()
         batch = records.close(n)
+        self._per_photon = 1.05 * batch.segment_count / n + 0.01
+        self._per_photon_hits = 1.05 * batch.hit_count / n + 0.01
+        return batch, records.stats
+
+    def _count(self, batch: PhotonBatch, per_stream: list, seconds: float, index: int) -> None:
+        """A traced batch's counts and flux into `stats`, in batch and stream order (sums that do
+        not depend on timing)."""
         tr = self.stats
-        for rays, sums, embree, passes, cut, first in records.stats:  # in stream order: sums do not depend on timing
+        tr.seconds += seconds
+        for rays, sums, embree, passes, cut, first in per_stream:
             tr.rays += rays
             tr.photons_hit += first
             tr.alpha_passes += passes
@@ -454,10 +479,7 @@ class PhotonTracer:
             tr.escaped += sums[1]
             tr.truncated += sums[2]
             tr.embree_seconds += embree
-        tr.photons += n
+        tr.photons += batch.photons
         tr.emitted += self.schedule.emitted_flux * self.schedule.weight(index)
         tr.segments += batch.segment_count
         tr.hits += batch.hit_count
-        self._per_photon = 1.05 * batch.segment_count / n + 0.01
-        self._per_photon_hits = 1.05 * batch.hit_count / n + 0.01
-        return batch
