@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Optional
@@ -146,8 +147,12 @@ class Pipeline:
 
     def run(self, reach_of=None) -> dict:
         lay = self.lay_out(reach_of)
-        plan = self.plan_denoising(lay)
-        light = self.direct_light(lay)
+        # The denoiser's plan (mostly one core's work) beside the direct light (every core's): neither
+        # reads what the other makes.
+        with ThreadPoolExecutor(1) as beside:
+            planned = beside.submit(self.plan_denoising, lay)
+            light = self.direct_light(lay)
+            plan = planned.result()
         est = self.build_estimators(lay)
         traced = self.trace(lay, light, est)
         results = self.results(lay, plan, light, est, traced)
@@ -196,7 +201,6 @@ class Pipeline:
         neighbours (finishing.plan); nothing without denoising."""
         if not (self.settings.denoise and denoise_mod.available()):
             return Denoising()
-        self.report(Progress("prepare", 0.0, "Finding the denoiser's regions and fragments"))
         plan = plan_denoising(lay.texels, self.scene, lay.caster, self.threads, self.settings.photons)
         lay.seconds["validity"] += plan.seconds["regions"]
         lay.seconds["fragments"] = plan.seconds["fragments"]
