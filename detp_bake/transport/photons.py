@@ -340,31 +340,21 @@ class PhotonTracer:
 
     def batches(self, cancel: Optional[Callable[[], bool]] = None,
                 indices: Optional[range] = None) -> Iterator[PhotonBatch]:
-        """The batches in order, or batches `indices` (a range of batch numbers) only. With several
-        threads the next batch is traced while the caller works through this one (an estimator's
-        `add` runs on one core): the batches are the same, one more is held."""
+        """The batches in order, or batches `indices` (a range of batch numbers) only."""
         if self._caster is None:
             self._caster = self._shared_caster or RayCaster(self.scene.positions)
-        order = list(range(self.batch_count) if indices is None else indices)
-        ahead = None
         if self.threads > 1:
             self._pool = ThreadPoolExecutor(self.threads)
-            ahead = ThreadPoolExecutor(1) if len(order) > 1 else None
-        pending = None
         try:
-            for n, index in enumerate(order):
+            for index in range(self.batch_count) if indices is None else indices:
                 if cancel is not None and cancel():
                     raise BakeCancelled()
-                traced = pending.result() if pending is not None else self._timed_batch(index)
-                pending = ahead.submit(self._timed_batch, order[n + 1]) if ahead and n + 1 < len(order) else None
-                self._count(*traced)
+                t0 = time.perf_counter()
+                batch = self._trace_batch(index)
+                self.stats.seconds += time.perf_counter() - t0
                 self.batches_done = index + 1
-                yield traced[0]
+                yield batch
         finally:
-            if pending is not None:
-                pending.cancel() or pending.exception()  # a batch under way ends before its buffers go
-            if ahead is not None:
-                ahead.shutdown()
             if self._pool is not None:
                 self._pool.shutdown(cancel_futures=True)
                 self._pool = None
@@ -440,14 +430,7 @@ class PhotonTracer:
         st.cut += b - a  # the last ones stay where they landed, as if the surface were opaque
         return b
 
-    def _timed_batch(self, index: int) -> tuple:
-        """Batch `index` traced (`_trace_batch`), with the seconds it took."""
-        t0 = time.perf_counter()
-        batch, per_stream = self._trace_batch(index)
-        return batch, per_stream, time.perf_counter() - t0, index
-
-    def _trace_batch(self, index: int) -> tuple[PhotonBatch, list]:
-        """Batch `index` traced, its streams on the pool's threads; with its streams' counts (`_count`)."""
+    def _trace_batch(self, index: int) -> PhotonBatch:
         start, stop = self.schedule.ids(index)
         n = stop - start
         bounds = self.stream_bounds(n)
@@ -461,16 +444,8 @@ class PhotonTracer:
             for j in [self._pool.submit(self._trace_stream, *job) for job in jobs]:
                 j.result()
         batch = records.close(n)
-        self._per_photon = 1.05 * batch.segment_count / n + 0.01
-        self._per_photon_hits = 1.05 * batch.hit_count / n + 0.01
-        return batch, records.stats
-
-    def _count(self, batch: PhotonBatch, per_stream: list, seconds: float, index: int) -> None:
-        """A traced batch's counts and flux into `stats`, in batch and stream order (sums that do
-        not depend on timing)."""
         tr = self.stats
-        tr.seconds += seconds
-        for rays, sums, embree, passes, cut, first in per_stream:
+        for rays, sums, embree, passes, cut, first in records.stats:  # in stream order: sums do not depend on timing
             tr.rays += rays
             tr.photons_hit += first
             tr.alpha_passes += passes
@@ -479,7 +454,10 @@ class PhotonTracer:
             tr.escaped += sums[1]
             tr.truncated += sums[2]
             tr.embree_seconds += embree
-        tr.photons += batch.photons
+        tr.photons += n
         tr.emitted += self.schedule.emitted_flux * self.schedule.weight(index)
         tr.segments += batch.segment_count
         tr.hits += batch.hit_count
+        self._per_photon = 1.05 * batch.segment_count / n + 0.01
+        self._per_photon_hits = 1.05 * batch.hit_count / n + 0.01
+        return batch
