@@ -499,17 +499,19 @@ def to_image(values: np.ndarray, lm: Lightmap, pixel: np.ndarray) -> tuple[np.nd
     return img.reshape(lm.height, lm.width, c), mask.reshape(lm.height, lm.width)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def _dilate(img, filled, margin):
     """In place: `margin` rings, each empty texel next to filled ones taking their mean (float32
     sums in neighbour order, as numpy's shifted sums gave); a ring reads only the texels filled
-    before it, so one image and two masks are all it needs."""
+    before it, so one image and two masks are all it needs, and its rows are independent (one
+    thread each)."""
     h, w, channels = img.shape
     grown = filled.copy()
-    acc = np.zeros(channels, np.float32)
     for _ in range(margin):
-        changed = False
-        for y in range(h):
+        changed = 0
+        for y in numba.prange(h):
+            acc = np.zeros(channels, np.float32)
+            row_changed = 0
             for x in range(w):
                 if filled[y, x]:
                     continue
@@ -527,8 +529,9 @@ def _dilate(img, filled, margin):
                     for c in range(channels):
                         img[y, x, c] = acc[c] / cnt
                     grown[y, x] = True
-                    changed = True
-        if not changed:
+                    row_changed += 1
+            changed += row_changed
+        if changed == 0:
             break
         filled[:] = grown
 
