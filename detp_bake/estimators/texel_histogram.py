@@ -110,27 +110,19 @@ def _landing_texels(pos, direction, tri, positions, normals, uvs, lm_of_tri, wid
         weight[h] = a
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True)
 def _add(texel, weight, flux, acc):
-    """The sums, each texel's in landing order: the same on any machine and thread count. Each
-    thread owns a range of texels and reads every landing (reading is cheap, the sums are not).
-    Returns how many counted."""
-    parts = numba.get_num_threads()
-    n = acc.shape[0]
-    counted = np.zeros(parts, np.int64)
-    for p in numba.prange(parts):
-        lo, hi = n * p // parts, n * (p + 1) // parts
-        c = 0
-        for h in range(texel.shape[0]):
-            k = texel[h]
-            if k >= lo and k < hi:
-                a = weight[h]
-                acc[k, 0] += flux[h, 0] * a
-                acc[k, 1] += flux[h, 1] * a
-                acc[k, 2] += flux[h, 2] * a
-                c += 1
-        counted[p] = c
-    return counted.sum()
+    """The sums, in landing order on one thread: the same on any machine. Returns how many counted."""
+    counted = 0
+    for h in range(texel.shape[0]):
+        k = texel[h]
+        if k >= 0:
+            a = weight[h]
+            acc[k, 0] += flux[h, 0] * a
+            acc[k, 1] += flux[h, 1] * a
+            acc[k, 2] += flux[h, 2] * a
+            counted += 1
+    return counted
 
 
 @numba.njit(cache=True)
