@@ -64,7 +64,8 @@ def _dilate_wide(img, filled, margin):
         filled[:] = grown
 
 
-WIDE = 256 * 256  # texels from which a dilation runs on every core
+WIDE_SIDE = 256
+WIDE = WIDE_SIDE * WIDE_SIDE  # texels from which a dilation runs on every core
 
 
 def dilate(image: np.ndarray, mask: np.ndarray, margin: int, in_place: bool = False) -> np.ndarray:

@@ -17,6 +17,7 @@ from typing import Optional
 import numpy as np
 
 from .. import estimators, options
+from ..lightmap import dilation
 from ..errors import BakeCancelled
 from ..scene import AreaLight, BakeObject, PointLight, Scene, SpotLight, SunLight
 from . import bake, job
@@ -72,6 +73,9 @@ def warm_up(threads: int = 0, cancel=None) -> float:
                                      threads=threads, batch_size=1000, probe_spacing=0.5, probe_rays=16,
                                      probes="auto" if direct == "sampled" else "off")  # the probes' kernels too
         bake.compute_many(_box(), settings, estimators.names(), cancel=cancel)
+    # Kernels only big lightmaps run (the tiny box's images are too small for them).
+    dilation.dilate(np.zeros((dilation.WIDE_SIDE, dilation.WIDE_SIDE, 3), np.float32),
+                    np.eye(dilation.WIDE_SIDE, dtype=bool), 1)
     return time.perf_counter() - t0
 
 
