@@ -31,12 +31,18 @@ PROBES = 4  # square_corner's corners
 
 @inline
 def _radical_inverse(k, base):
+    """The radical inverse of k ≥ 0 in `base` (3 or 5: a Halton coordinate). Unsigned division
+    by a constant, which the compiler turns into a multiplication: signed `//` and `%` made this
+    most of a shadow ray's cost where points miss a small triangle and are tried again."""
     inv = 1.0 / base
     f = inv
     r = 0.0
+    k = np.uint64(k)
+    b = np.uint64(base)
     while k > 0:
-        r += f * (k % base)
-        k //= base
+        q = k // b
+        r += f * np.float64(k - q * b)
+        k = q
         f *= inv
     return r
 
