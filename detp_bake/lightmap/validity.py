@@ -41,7 +41,7 @@ import numpy as np
 from ..bvh import TriangleTree
 from ..components import connected_components
 from ..sampling import inline
-from .texels import TexelSet, geometric_normals, lightmap_triangles, neighbour_pairs, pixel_steps
+from .texels import TexelSet, geometric_normals, lightmap_triangles, pixel_steps
 
 DIRECTIONS = 8  # probe rays per texel, in opposite pairs
 LIFT = 0.02  # probe height above the surface, in texel sizes
@@ -390,12 +390,15 @@ def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
     return cuts
 
 
-def blocked_between(texels: TexelSet, i: np.ndarray, j: np.ndarray, lift: float, caster, scene,
+def blocked_between(texels: TexelSet, i: np.ndarray, j: np.ndarray, lift, caster, scene,
                     threads: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """(whether a ray from texel i's sample point to texel j's, both lifted `lift` metres off their
-    faces, meets anything on the way; the rays' lengths) for the texel pairs (i, j)."""
+    """(whether a ray from texel i's sample point to texel j's, both lifted `lift` metres (one for
+    all, or one a pair) off their faces, meets anything on the way; the rays' lengths) for the
+    texel pairs (i, j)."""
     gi = geometric_normals(scene, texels.triangle[i], texels.normal[i])
     gj = geometric_normals(scene, texels.triangle[j], texels.normal[j])
+    lift = np.asarray(lift, np.float64)
+    lift = lift[:, None] if lift.ndim else lift
     a = texels.position[i] + lift * gi
     span = texels.position[j] + lift * gj - a
     length = np.linalg.norm(span, axis=1)
@@ -407,30 +410,61 @@ def regions(texels: TexelSet, lm, cuts: Cuts, caster, scene) -> np.ndarray:
     along the surface (0, 1, …; −1 in the gutter). Neighbours (8 ways) are linked unless a ray
     between their sample points, lifted off the surface, is blocked; only texels with a cut, less
     than NEIGHBOURS texels apart, can lose a link."""
-    sl = lm.texels
-    grid = np.full(lm.width * lm.height, -1, np.int64)
-    grid[texels.pixel[sl]] = np.arange(lm.count)
-    grid = grid.reshape(lm.height, lm.width)
-    cut = cuts.of[sl] >= 0
+    at = next(i for i, m in enumerate(texels.lightmaps) if m.name == lm.name)
+    return _regions_of(texels, np.array([at]), cuts, caster, scene)[lm.name]
+
+
+def all_regions(texels: TexelSet, cuts: Cuts, caster, scene, threads: int = 1) -> dict:
+    """{name: `regions` of each lightmap with a cut texel}."""
+    per = np.repeat(np.arange(len(texels.lightmaps)), [lm.count for lm in texels.lightmaps])
+    return _regions_of(texels, np.flatnonzero(np.bincount(per[cuts.of >= 0], minlength=len(texels.lightmaps))),
+                       cuts, caster, scene, threads)
+
+
+def _regions_of(texels: TexelSet, which: np.ndarray, cuts: Cuts, caster, scene, threads: int = 1) -> dict:
+    """`regions` of the lightmaps `which` (indices, ascending), all at once: their pairs of
+    neighbours from one grid of all their pixels, one call for the rays and one for the components
+    (1,500 small objects, a pass each, took a second). Components never cross lightmaps and are
+    numbered by their first texel, so each lightmap's labels run on from its first texel's."""
+    lms = [texels.lightmaps[i] for i in which]
+    count = np.array([lm.count for lm in lms], np.int64)
+    node = np.concatenate([np.arange(lm.offset, lm.offset + lm.count) for lm in lms]) if lms else np.zeros(0, int)
+    own = np.repeat(np.arange(len(lms)), count)
+    width = np.array([lm.width for lm in lms], np.int64)[own]
+    height = np.array([lm.height for lm in lms], np.int64)[own]
+    size = np.array([lm.texel_size for lm in lms], np.float64)[own]
+    pixel = texels.pixel[node].astype(np.int64)
+    base = np.cumsum([0] + [lm.width * lm.height for lm in lms])
+    grid = np.full(int(base[-1]), -1, np.int64)
+    grid[base[own] + pixel] = np.arange(len(node))
+    x, y = pixel % width, pixel // width
     pairs = []
-    for a, b in neighbour_pairs(grid):
-        ok = (a >= 0) & (b >= 0)
-        pairs.append(np.stack([a[ok], b[ok]], axis=1))
+    for dx, dy in ((1, 0), (0, 1), (1, 1), (-1, 1)):  # each pair of 8-neighbours once (texels.neighbour_pairs)
+        inside = (x + dx >= 0) & (x + dx < width) & (y + dy < height)
+        a = np.flatnonzero(inside)
+        b = grid[base[own[a]] + pixel[a] + dy * width[a] + dx]
+        pairs.append(np.stack([a[b >= 0], b[b >= 0]], axis=1))
     pairs = np.concatenate(pairs)
     keep = np.ones(len(pairs), bool)
+    cut = cuts.of[node] >= 0
     test = np.flatnonzero(cut[pairs[:, 0]] | cut[pairs[:, 1]])
     if test.size:
-        blocked, length = blocked_between(texels, pairs[test, 0] + lm.offset, pairs[test, 1] + lm.offset,
-                                          LIFT * lm.texel_size, caster, scene)
+        i, j = pairs[test, 0], pairs[test, 1]
+        blocked, length = blocked_between(texels, node[i], node[j], LIFT * size[i], caster, scene, threads)
         # Neighbours in the image that lie far apart on the surface are two charts side by side in
         # the atlas: the denoiser has always seen them as one image, and no wall is to blame.
-        near = (length > 0) & (length < NEIGHBOURS * lm.texel_size)
+        near = (length > 0) & (length < NEIGHBOURS * size[i])
         keep[test[blocked & near]] = False
     links = pairs[keep]
-    _, label = connected_components(lm.count, links[:, 0], links[:, 1])
-    out = np.full(lm.width * lm.height, -1, np.int32)
-    out[texels.pixel[sl]] = label
-    return out.reshape(lm.height, lm.width)
+    _, label = connected_components(len(node), links[:, 0], links[:, 1])
+    out, at = {}, 0
+    for lm in lms:
+        image = np.full(lm.width * lm.height, -1, np.int32)
+        if lm.count:
+            image[pixel[at:at + lm.count]] = label[at:at + lm.count] - label[at]
+        out[lm.name] = image.reshape(lm.height, lm.width)
+        at += lm.count
+    return out
 
 
 def by_object(texels: TexelSet, lm, scene, regions=None) -> np.ndarray:
