@@ -271,12 +271,12 @@ def _remove(pri, val, n):
 
 
 @numba.njit(cache=True)
-def _one(data, tree, lo0, hi0, x, k, bound, node_of, min_of, side_of, qp, qv, npri, nval, out_d, out_i):
-    """The k nearest of `data` to `x` with d² < bound², as cKDTree's query walks the tree: nearer
-    children first, farther ones on a heap by their least distance."""
+def _one(data, tree, root, lo0, hi0, x, k, bound, node_of, min_of, side_of, qp, qv, npri, nval, out_d, out_i):
+    """The k nearest of `data` to `x` with d² < bound², as cKDTree's query walks the tree from node
+    `root`: nearer children first, farther ones on a heap by their least distance."""
     idx, node, split = tree
     ub = bound * bound
-    node_of[0], min_of[0], free = 0, 0.0, 1
+    node_of[0], min_of[0], free = root, 0.0, 1
     for i in range(3):
         s = max(x[i] - hi0[i], 0.0)
         if not x[i] - hi0[i] > 0.0:
@@ -338,7 +338,7 @@ def _query(data, tree, lo0, hi0, xs, k, bound, out_d, out_i, blocks):
         while q < (b + 1) * m // blocks:
             node_of, min_of, side_of = np.empty(cap, np.int64), np.empty(cap), np.empty((cap, 3))
             qp, qv = np.empty(cap), np.empty(cap, np.int64)
-            while q < (b + 1) * m // blocks and _one(data, tree, lo0, hi0, xs[q], k, bound, node_of, min_of,
+            while q < (b + 1) * m // blocks and _one(data, tree, 0, lo0, hi0, xs[q], k, bound, node_of, min_of,
                                                      side_of, qp, qv, npri, nval, out_d[q], out_i[q]):
                 q += 1
             cap *= 2
@@ -377,8 +377,8 @@ class KDTree:
 @numba.njit(cache=True)
 def _forest(data, start, count):
     """The tree of each group of points data[start[g]:start[g] + count[g]] (count 0: none), built as
-    KDTree builds it, the trees laid end to end: (idx, each group's own indices in its run; node and
-    split, group g's rows first[g]:first[g + 1]; first; each group's lo and hi)."""
+    KDTree builds it, the trees laid end to end and their indices made global: (idx; node and split,
+    group g's root at row first[g]; first; each group's lo and hi)."""
     groups = start.shape[0]
     lo, hi = np.zeros((groups, 3)), np.zeros((groups, 3))
     idx = np.zeros(data.shape[0], np.int64)
@@ -396,8 +396,10 @@ def _forest(data, start, count):
         t_idx, t_node, t_split = _build(points, lo[g], hi[g], True, True)
         m = t_node.shape[0]
         node, split = _grown(node, used + m), _grown(split, used + m)
-        idx[a:a + n] = t_idx
+        idx[a:a + n] = t_idx + a
         node[used:used + m] = t_node
+        node[used:used + m, :2] += a
+        node[used:used + m, 3:] += used
         split[used:used + m, 0] = t_split
         used += m
     first[groups] = used
@@ -418,9 +420,8 @@ def _forest_query(data, forest, start, count, xs, group, k, bound, out_d, out_i,
             qp, qv = np.empty(cap), np.empty(cap, np.int64)
             while q < (b + 1) * m // blocks:
                 g = group[q]
-                a, n, f0, f1 = start[g], count[g], first[g], first[g + 1]
-                if not _one(data[a:a + n], (idx[a:a + n], node[f0:f1], split[f0:f1]), lo[g], hi[g], xs[q], k[g],
-                            bound[g], node_of, min_of, side_of, qp, qv, npri, nval, out_d[q], out_i[q]):
+                if not _one(data, (idx, node, split), first[g], lo[g], hi[g], xs[q], k[g], bound[g], node_of,
+                            min_of, side_of, qp, qv, npri, nval, out_d[q], out_i[q]):
                     break
                 q += 1
             cap *= 2
@@ -428,9 +429,10 @@ def _forest_query(data, forest, start, count, xs, group, k, bound, out_d, out_i,
 
 def query_groups(points, start, count, x, group, k, bound):
     """For each of the (M, 3) points `x` in group `group[q]`, what KDTree(points[a:a + n]).query(x, k[g],
-    bound[g]) gives (a = start[g], n = count[g]): ((M, max k) distances, (M, max k) indices within
-    the group), a row past its k, or short of neighbours, ending in (inf, n). Every group's tree
-    is built and asked in one call: no Python work per group (1,500 small objects took 0.5 s so)."""
+    bound[g]) gives (a = start[g], n = count[g]), its indices + a: ((M, max k) distances, (M, max k)
+    indices into `points`), a row past its k, or short of neighbours, ending in (inf, len(points)).
+    Every group's tree is built and asked in one call: no Python work per group (1,500 small
+    objects, a tree each, took 0.5 s)."""
     points = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 3))
     x = np.ascontiguousarray(np.asarray(x, np.float64).reshape(-1, 3))
     start, count = np.asarray(start, np.int64), np.asarray(count, np.int64)
@@ -440,7 +442,7 @@ def query_groups(points, start, count, x, group, k, bound):
         raise ValueError("query_groups: k must be at least 1 in every group asked")
     width = int(k[group].max()) if len(group) else 1
     dist = np.full((len(x), width), np.inf)
-    idx = np.repeat(count[group], width).reshape(len(x), width)
+    idx = np.full((len(x), width), len(points), np.int64)
     if len(x):
         asked = np.zeros(len(count), bool)
         asked[group] = True

@@ -210,8 +210,8 @@ def _neighbours(texels, scene, caster, threads, frag, group, start, count, size)
     own = size[group]
     dist, near = query_groups(pos, start, count, pos[frag], group, np.minimum(NEIGHBOURS, count),
                               3 * SIGMA * size)
-    found = near < count[group][:, None]
-    near = np.where(found, near + start[group][:, None], frag[:, None])
+    found = near < len(pos)
+    near = np.where(found, near, frag[:, None])
     for a in range(0, len(frag), CHUNK):  # (F, K, 3) normals a chunk at a time: 2 GB for a million texels
         found[a:a + CHUNK] &= np.einsum("fc,fkc->fk", nrm[frag[a:a + CHUNK]], nrm[near[a:a + CHUNK]]) >= COS
     # A ray from a texel to a neighbour can be blocked only where some triangle crosses the disc of
