@@ -191,13 +191,15 @@ def _clip(xs, ys, fs, n, bx, by):
 
 
 @numba.njit(cache=True)
-def _near_areas(uv, positions, world_area, width, height, texel_of, cut_of, cut_p, cut_n, out):
-    """out[c] += the world area of the triangles (UVs `uv` in 0..1, world `positions`) inside the
-    square of the texel with cut c (`texel_of` a pixel's texel, −1 for none) on that texel's side of
-    both its cut lines: what the texel histogram's landings are tested against (on_side)."""
+def _near_areas(uv, positions, world_area, sides, base, texel_of, cut_of, cut_p, cut_n, out):
+    """out[c] += the world area of the triangles (UVs `uv` in 0..1, world `positions`; in a lightmap
+    of `sides` (width, height) whose pixels' texels are texel_of[base:], −1 for none) inside the
+    square of the texel with cut c on that texel's side of both its cut lines: what the texel
+    histogram's landings are tested against (on_side)."""
     xs, ys, fs = np.empty(16), np.empty(16), np.empty(16)
     bx, by = np.empty(16), np.empty(16)
     for t in range(uv.shape[0]):
+        width, height = sides[t, 0], sides[t, 1]
         ax, ay = uv[t, 0, 0] * width, uv[t, 0, 1] * height
         ex, ey = uv[t, 1, 0] * width, uv[t, 1, 1] * height
         gx, gy = uv[t, 2, 0] * width, uv[t, 2, 1] * height
@@ -211,7 +213,7 @@ def _near_areas(uv, positions, world_area, width, height, texel_of, cut_of, cut_
         j1 = min(height - 1, int(np.floor(max(ay, max(ey, gy)))))
         for j in range(j0, j1 + 1):
             for i in range(i0, i1 + 1):
-                k = texel_of[j * width + i]
+                k = texel_of[base[t] + j * width + i]
                 if k < 0 or cut_of[k] < 0:
                     continue
                 c = cut_of[k]
@@ -257,13 +259,18 @@ def _shares(texels: TexelSet, scene, cuts: Cuts) -> np.ndarray:
     _, cut_p, cut_n = cuts.kernel_arrays()
     world_area = 0.5 * np.linalg.norm(np.cross(scene.positions[:, 1] - scene.positions[:, 0],
                                                scene.positions[:, 2] - scene.positions[:, 0]), axis=1)
-    for lm in texels.lightmaps:
-        sl = lightmap_triangles(scene, lm)
-        texel_of = np.full(lm.width * lm.height, -1, np.int32)  # 4 bytes a pixel, not 8: fewer than 2³¹ texels
-        texel_of[texels.pixel[lm.texels]] = np.arange(lm.offset, lm.offset + lm.count)
-        _near_areas(np.ascontiguousarray(scene.uvs[sl], np.float64), np.ascontiguousarray(scene.positions[sl], np.float64),
-                    np.ascontiguousarray(world_area[sl], np.float64), lm.width, lm.height, texel_of,
-                    np.ascontiguousarray(cuts.of), cut_p, cut_n, near)
+    # Every lightmap with a cut at once: each triangle reads the texels of its own lightmap's pixels.
+    lms = [texels.lightmaps[i] for i in _with_cuts(texels, cuts)]
+    tris = [lightmap_triangles(scene, lm) for lm in lms]
+    tri, own = np.concatenate(tris), np.repeat(np.arange(len(lms)), [len(t) for t in tris])
+    sides = np.array([[lm.width, lm.height] for lm in lms], np.int64)
+    base = np.cumsum([0] + [lm.width * lm.height for lm in lms])
+    node = np.concatenate([np.arange(lm.offset, lm.offset + lm.count) for lm in lms])
+    texel_of = np.full(int(base[-1]), -1, np.int32)  # 4 bytes a pixel, not 8: fewer than 2³¹ texels
+    texel_of[base[np.repeat(np.arange(len(lms)), [lm.count for lm in lms])] + texels.pixel[node]] = node
+    _near_areas(np.ascontiguousarray(scene.uvs[tri], np.float64), np.ascontiguousarray(scene.positions[tri], np.float64),
+                np.ascontiguousarray(world_area[tri], np.float64), sides[own], base[own].astype(np.int64), texel_of,
+                np.ascontiguousarray(cuts.of), cut_p, cut_n, near)
     owner = np.empty(len(near), np.int64)
     owner[cuts.of[cuts.of >= 0]] = np.flatnonzero(cuts.of >= 0)
     return np.clip(near / np.maximum(texels.area[owner].astype(np.float64), 1e-300), MIN_SHARE, 1.0)
@@ -291,18 +298,18 @@ class _Triangles(TriangleTree):
 
 
 def _subset(texels: TexelSet, rows) -> TexelSet:
-    """Texels `rows` (a slice: views, no copies; or ascending indices) as a TexelSet whose lightmaps
-    count only them, so that the per-texel helpers (pixel_steps) run on a block at a time."""
+    """Texels `rows` (a slice: views, no copies; or ascending indices) as a TexelSet of the lightmaps
+    that hold some of them, each counting only those, so that the per-texel helpers (pixel_steps)
+    run on a block at a time. Lightmaps with none are left out: a block of 1,500 small objects'
+    texels holds a few of them, and each one kept costs a copy of its Lightmap."""
+    start = np.array([lm.offset for lm in texels.lightmaps], np.int64)
+    end = start + np.array([lm.count for lm in texels.lightmaps], np.int64)
     if isinstance(rows, slice):
-        def before(k):
-            return min(max(k, rows.start), rows.stop) - rows.start
+        lo, hi = (np.clip(k, rows.start, rows.stop) - rows.start for k in (start, end))
     else:
-        def before(k):
-            return int(np.searchsorted(rows, k))
-    lightmaps = []
-    for lm in texels.lightmaps:
-        lo, hi = before(lm.offset), before(lm.offset + lm.count)
-        lightmaps.append(replace(lm, offset=lo, count=hi - lo))
+        lo, hi = np.searchsorted(rows, start), np.searchsorted(rows, end)
+    lightmaps = [replace(texels.lightmaps[i], offset=int(lo[i]), count=int(hi[i] - lo[i]))
+                 for i in np.flatnonzero(hi > lo)]
     return TexelSet(texels.position[rows], texels.normal[rows], texels.triangle[rows], texels.pixel[rows],
                     texels.area[rows], texels.centre_inside[rows], lightmaps)
 
@@ -416,9 +423,13 @@ def regions(texels: TexelSet, lm, cuts: Cuts, caster, scene) -> np.ndarray:
 
 def all_regions(texels: TexelSet, cuts: Cuts, caster, scene, threads: int = 1) -> dict:
     """{name: `regions` of each lightmap with a cut texel}."""
+    return _regions_of(texels, _with_cuts(texels, cuts), cuts, caster, scene, threads)
+
+
+def _with_cuts(texels: TexelSet, cuts: Cuts) -> np.ndarray:
+    """Indices of the lightmaps with a cut texel, ascending."""
     per = np.repeat(np.arange(len(texels.lightmaps)), [lm.count for lm in texels.lightmaps])
-    return _regions_of(texels, np.flatnonzero(np.bincount(per[cuts.of >= 0], minlength=len(texels.lightmaps))),
-                       cuts, caster, scene, threads)
+    return np.flatnonzero(np.bincount(per[cuts.of >= 0], minlength=len(texels.lightmaps)))
 
 
 def _regions_of(texels: TexelSet, which: np.ndarray, cuts: Cuts, caster, scene, threads: int = 1) -> dict:
