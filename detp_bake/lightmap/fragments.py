@@ -50,6 +50,7 @@ STARVED_WIDTH = 32.0  # texels: a starved lightmap's charts narrower than this s
 # cleans best: a 64-texel plane at 10 photons a texel, 7.9 % per texel by OIDN, 10.5 % smoothed)
 LIFT = 0.25  # texel sizes: rays between neighbours pass this far above the surface (over a convex curve's chord)
 CHUNK = 1 << 16  # fragment texels whose neighbours' normals are held at once (40 MB)
+BATCH = 1 << 18  # fragment texels (of whole lightmaps) found at once: 50 MB an (F, K) float64 array
 
 
 @dataclass
@@ -186,11 +187,16 @@ def find_all(texels: TexelSet, scene, caster, threads: int = 1, starved=(), ligh
     count = np.array([lm.count for lm in texels.lightmaps], np.int64)
     size = np.array([lm.texel_size for lm in texels.lightmaps], np.float64)
     group = np.searchsorted(start + count, frag, side="right")  # each fragment texel's lightmap
-    near, weight = _neighbours(texels, scene, caster, threads, frag, group, start, count, size)
-    pixel = texels.pixel.astype(np.int64)
-    near = pixel[near].astype(np.int32)
-    frag_pixel = pixel[frag]
-    ends = np.searchsorted(group, np.arange(len(start) + 1))
+    ends = np.searchsorted(group, np.arange(len(start) + 1))  # each lightmap's rows of `frag`
+    near, weight = np.zeros((len(frag), NEIGHBOURS), np.int32), np.zeros((len(frag), NEIGHBOURS), np.float32)
+    # Whole lightmaps at a time, about BATCH fragment texels: their (F, K) float64 arrays stay small.
+    bounds = np.unique(np.append(ends[np.searchsorted(ends, np.arange(0, len(frag), BATCH), side="right") - 1],
+                                 len(frag)))
+    triangles = TriangleTree(scene.positions)
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        n, w = _neighbours(texels, scene, caster, threads, frag[a:b], group[a:b], start, count, size, triangles)
+        near[a:b, :n.shape[1]], weight[a:b, :n.shape[1]] = texels.pixel[n], w
+    frag_pixel = texels.pixel[frag].astype(np.int64)
     for lm in lightmaps:
         g = at[lm.name]
         a, b, k = ends[g], ends[g + 1], min(NEIGHBOURS, lm.count)
@@ -200,12 +206,12 @@ def find_all(texels: TexelSet, scene, caster, threads: int = 1, starved=(), ligh
     return out
 
 
-def _neighbours(texels, scene, caster, threads, frag, group, start, count, size) -> tuple:
-    """((F, NEIGHBOURS) texels, (F, NEIGHBOURS) float32 weights) of the fragment texels `frag` (in
-    lightmaps `group`, whose texels run from `start`, `count` of them, `size` metres wide): the
-    nearest of their own lightmap within 3 SIGMA, facing the same way and seen along the surface,
-    each texel itself with weight 1 where it has no other (a row past its lightmap's count ends in
-    weights 0)."""
+def _neighbours(texels, scene, caster, threads, frag, group, start, count, size, triangles) -> tuple:
+    """((F, K) texels, (F, K) float32 weights) of the fragment texels `frag` (in lightmaps `group`,
+    whose texels run from `start`, `count` of them, `size` metres wide; K the most any of them
+    takes): the nearest of their own lightmap within 3 SIGMA, facing the same way and seen along
+    the surface (`triangles`: the scene's TriangleTree), each texel itself with weight 1 where it
+    has no other (a row past its lightmap's count ends in weights 0)."""
     pos, nrm = texels.position, texels.normal
     own = size[group]
     dist, near = query_groups(pos, start, count, pos[frag], group, np.minimum(NEIGHBOURS, count),
@@ -218,7 +224,7 @@ def _neighbours(texels, scene, caster, threads, frag, group, start, count, size)
     # its reach lifted off the surface: most texels of an open floor need no rays.
     g = geometric_normals(scene, texels.triangle[frag], nrm[frag])
     lifted = pos[frag] + (LIFT * own)[:, None] * g
-    crossed = TriangleTree(scene.positions).discs_meet(lifted, g, 3 * SIGMA * own)
+    crossed = triangles.discs_meet(lifted, g, 3 * SIGMA * own)
     other = found & (near != frag[:, None]) & crossed[:, None]
     f, j = np.nonzero(other)
     if f.size:

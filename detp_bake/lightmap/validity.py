@@ -50,7 +50,7 @@ PUSH = 0.05  # how far past the face a moved sample point lands, in texel sizes
 STANDING = np.cos(np.radians(45.0))  # faces steeper than this against the texel's surface stand on it
 MIN_SHARE = 1.0 / 36  # the least share of its square's area a cut texel keeps
 CHUNK = 1 << 13  # texels a probe task casts rays for: ~10 MB of float64 temporaries a task running
-BLOCK = 1 << 18  # texels find_cuts holds float64 sizes, normals and discs for at once
+BLOCK = 1 << 18  # texels find_cuts holds float64 sizes, normals and discs for at once (all_regions: pairs)
 NEIGHBOURS = 3.0  # texel sizes: neighbours in the image further apart than this are not tested (regions)
 
 
@@ -422,8 +422,15 @@ def regions(texels: TexelSet, lm, cuts: Cuts, caster, scene) -> np.ndarray:
 
 
 def all_regions(texels: TexelSet, cuts: Cuts, caster, scene, threads: int = 1) -> dict:
-    """{name: `regions` of each lightmap with a cut texel}."""
-    return _regions_of(texels, _with_cuts(texels, cuts), cuts, caster, scene, threads)
+    """{name: `regions` of each lightmap with a cut texel}, found whole lightmaps at a time, about
+    BLOCK texels (their pairs take some 150 bytes a texel)."""
+    which = _with_cuts(texels, cuts)
+    ends = np.cumsum([0] + [texels.lightmaps[i].count for i in which])
+    bounds = np.unique(np.append(np.searchsorted(ends, np.arange(0, ends[-1], BLOCK), side="right") - 1, len(which)))
+    out = {}
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        out.update(_regions_of(texels, which[a:b], cuts, caster, scene, threads))
+    return out
 
 
 def _with_cuts(texels: TexelSet, cuts: Cuts) -> np.ndarray:
