@@ -448,30 +448,20 @@ def _regions_of(texels: TexelSet, which: np.ndarray, cuts: Cuts, caster, scene, 
     count = np.array([lm.count for lm in lms], np.int64)
     node = np.concatenate([np.arange(lm.offset, lm.offset + lm.count) for lm in lms]) if lms else np.zeros(0, int)
     own = np.repeat(np.arange(len(lms)), count)
-    width = np.array([lm.width for lm in lms], np.int64)[own]
-    height = np.array([lm.height for lm in lms], np.int64)[own]
-    size = np.array([lm.texel_size for lm in lms], np.float64)[own]
+    size = np.array([lm.texel_size for lm in lms], np.float64)
     pixel = texels.pixel[node].astype(np.int64)
-    base = np.cumsum([0] + [lm.width * lm.height for lm in lms])
-    grid = np.full(int(base[-1]), -1, np.int64)
-    grid[base[own] + pixel] = np.arange(len(node))
-    x, y = pixel % width, pixel // width
-    pairs = []
-    for dx, dy in ((1, 0), (0, 1), (1, 1), (-1, 1)):  # each pair of 8-neighbours once (texels.neighbour_pairs)
-        inside = (x + dx >= 0) & (x + dx < width) & (y + dy < height)
-        a = np.flatnonzero(inside)
-        b = grid[base[own[a]] + pixel[a] + dy * width[a] + dx]
-        pairs.append(np.stack([a[b >= 0], b[b >= 0]], axis=1))
-    pairs = np.concatenate(pairs)
+    sides = np.array([[lm.width, lm.height] for lm in lms], np.int64).reshape(-1, 2)
+    pairs = _pairs(pixel, own, sides, np.cumsum([0] + [lm.width * lm.height for lm in lms]))
     keep = np.ones(len(pairs), bool)
     cut = cuts.of[node] >= 0
     test = np.flatnonzero(cut[pairs[:, 0]] | cut[pairs[:, 1]])
     if test.size:
         i, j = pairs[test, 0], pairs[test, 1]
-        blocked, length = blocked_between(texels, node[i], node[j], LIFT * size[i], caster, scene, threads)
+        own_size = size[own[i]]
+        blocked, length = blocked_between(texels, node[i], node[j], LIFT * own_size, caster, scene, threads)
         # Neighbours in the image that lie far apart on the surface are two charts side by side in
         # the atlas: the denoiser has always seen them as one image, and no wall is to blame.
-        near = (length > 0) & (length < NEIGHBOURS * size[i])
+        near = (length > 0) & (length < NEIGHBOURS * own_size)
         keep[test[blocked & near]] = False
     links = pairs[keep]
     _, label = connected_components(len(node), links[:, 0], links[:, 1])
@@ -483,6 +473,31 @@ def _regions_of(texels: TexelSet, which: np.ndarray, cuts: Cuts, caster, scene, 
         out[lm.name] = image.reshape(lm.height, lm.width)
         at += lm.count
     return out
+
+
+@numba.njit(cache=True)
+def _pairs(pixel, own, sides, base):
+    """(P, 2) the pairs (a, b) of texels (rows of `pixel`, each a pixel of lightmap own[a], whose
+    sides[own[a]] are its width and height and whose pixels are numbered on from base[own[a]])
+    that are 8-neighbours in their image, each pair once: b right of a, above it, above and right,
+    or above and left."""
+    n = pixel.shape[0]
+    grid = np.full(base[-1], -1, np.int32)  # 4 bytes a pixel: fewer than 2³¹ texels
+    for a in range(n):
+        grid[base[own[a]] + pixel[a]] = a
+    step_x, step_y = np.array([1, 0, 1, -1]), np.array([0, 1, 1, 1])
+    out = np.empty((4 * n, 2), np.int64)
+    m = 0
+    for a in range(n):
+        w, h = sides[own[a], 0], sides[own[a], 1]
+        x, y = pixel[a] % w, pixel[a] // w
+        for d in range(4):
+            if 0 <= x + step_x[d] < w and y + step_y[d] < h:
+                b = grid[base[own[a]] + pixel[a] + step_y[d] * w + step_x[d]]
+                if b >= 0:
+                    out[m, 0], out[m, 1] = a, b
+                    m += 1
+    return out[:m].copy()
 
 
 def by_object(texels: TexelSet, lm, scene, regions=None) -> np.ndarray:
