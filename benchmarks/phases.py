@@ -36,7 +36,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-PHASES = ("export", "rasterise", "validity", "direct", "trace", "estimate", "denoise")
+PHASES = ("export", "rasterise", "validity", "fragments", "direct", "trace", "estimate", "denoise")
 
 
 def _build(case: str, blend: str, crates: int) -> None:

@@ -279,7 +279,7 @@ def test_a_shadow_edge_across_texels_gives_each_its_lit_share():
 
 def test_shadow_edges_of_a_sharp_light_converge_with_more_rays():
     """A sharp sun adds rays only where a texel's first ones disagree. Those first four start at
-    the corners of the texel's square (texel_area.probe_point), so a straight edge crossing the
+    the corners of the texel's square (texel_area.square_corner), so a straight edge crossing the
     square is always seen: with 64 rays the edge texels read their lit share to 0.05 RMS, and
     more rays bring them closer. From four points inside the square (before) half the edge
     texels took no more rays: 0.10-0.13 RMS at 16, 64 or 256 rays alike (the error floored)."""

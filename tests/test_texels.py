@@ -1,7 +1,7 @@
 """Texel rasterisation and dilation, checked against geometry computed by hand."""
 import numpy as np
 
-from detp_bake.lightmap import texels
+from detp_bake.lightmap import dilation, texels
 from detp_bake.scene import PointLight
 from synthetic import grid, make_scene
 
@@ -46,7 +46,7 @@ def test_dilation_fills_the_gutter_with_neighbour_means():
     mask = np.zeros((8, 8), bool)
     img[3:5, 3:5] = 2.0
     mask[3:5, 3:5] = True
-    out = texels.dilate(img, mask, 1)
+    out = dilation.dilate(img, mask, 1)
     assert np.all(out[2:6, 2:6] == 2.0)
     assert out[0, 0] == 0 and out[1, 1] == 0
-    assert np.all(texels.dilate(img, mask, 16) == 2.0)
+    assert np.all(dilation.dilate(img, mask, 16) == 2.0)

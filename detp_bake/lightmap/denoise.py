@@ -3,7 +3,7 @@
 A lightmap is mostly gutter: texels no UV chart covers, which hold 0 after a bake. Handed to a
 denoiser as they are, those zeros are an edge the network preserves by darkening the chart texels
 next to them, and the output would seam under bilinear filtering. So the gutter is filled first
-(`texels.dilate`, the extend-margin the bake gives its output images, then the covered mean for
+(`dilation.dilate`, the extend-margin the bake gives its output images, then the covered mean for
 whatever lies further out), the whole image is denoised, and afterwards only the covered texels are
 kept and the gutter is filled again from the denoised ones.
 
@@ -51,7 +51,8 @@ import numpy as np
 from ..components import label_boxes
 from ..distance_transform import distance_transform
 from ..errors import BakeError
-from .texels import dilate, neighbour_pairs
+from .dilation import dilate
+from .texels import neighbour_pairs
 
 FILTERS = ("RT", "RTLightmap")
 # Rings of neighbour-mean extension before the rest of the gutter takes the covered mean. OIDN's
@@ -92,7 +93,7 @@ def available() -> bool:
 
 
 def _grow(mask: np.ndarray, rings: int) -> np.ndarray:
-    """The texels `texels.dilate` reaches in `rings` rings (8-neighbour growth), as a bool mask."""
+    """The texels `dilation.dilate` reaches in `rings` rings (8-neighbour growth), as a bool mask."""
     grown = mask.copy()
     for _ in range(int(rings)):
         p = np.pad(grown, 1)
@@ -106,7 +107,7 @@ def _grow(mask: np.ndarray, rings: int) -> np.ndarray:
 
 def fill_gutter(image: np.ndarray, mask: np.ndarray, rings: int = FILL_RINGS, in_place: bool = False) -> np.ndarray:
     """Every texel of `image` given a value that continues the covered ones smoothly: `rings` of
-    neighbour-mean extension (`texels.dilate`), then the mean of the covered texels beyond, so no
+    neighbour-mean extension (`dilation.dilate`), then the mean of the covered texels beyond, so no
     texel the denoiser sees is an artificial 0 (or garbage from an earlier pass). `in_place`: fill
     `image` itself (float32) rather than a copy."""
     out = dilate(image, mask, rings, in_place=in_place)
@@ -155,7 +156,7 @@ def denoise_lightmap(image: np.ndarray, mask: np.ndarray, albedo: Optional[np.nd
     chart's border texels cover slivers of surface, and OIDN evens them out with their neighbours:
     a plain mean over texels then counts a small chart's (a leaf's) rim as much as its middle, and
     the rescale shifts its energy.
-    margin: rings of `texels.dilate` that refill the gutter from the denoised texels afterwards
+    margin: rings of `dilation.dilate` that refill the gutter from the denoised texels afterwards
     (pass the bake's margin setting); texels further out are 0, as a bake leaves them.
     quality: OIDN's "high" (default), "balanced" or "fast".
     regions: (H, W) int labels of texels that see each other along the surface (validity.regions):

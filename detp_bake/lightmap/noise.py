@@ -16,6 +16,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ..sampling import jit
+
 MIN_GROUPS = 4  # groups needed before the estimate is trusted for stopping a bake
 
 
@@ -32,6 +34,31 @@ def _add_wx2(cumulative, previous, w, sum_wx2):
         x = (lum - np.float64(previous[i])) / w
         sum_wx2[i] = np.float64(sum_wx2[i]) + w * x * x
         previous[i] = lum
+
+
+@jit
+def _lightmap_sums(first, end, previous, sum_wx2, weight, groups, level, level_scale, indirect_scale, spread,
+                   luminance):
+    """Per lightmap m (texels first[m] … end[m] − 1): the sum of the texels' variances (as
+    BatchNoise.variance) into spread[m] and of their luminance (BatchNoise.relative) into
+    luminance[m], in float64."""
+    channels = level.shape[1]
+    for m in range(first.shape[0]):
+        s = 0.0
+        total = 0.0
+        for i in range(first[m], end[m]):
+            p = np.float64(previous[i])
+            mean = p / weight
+            s += max(np.float64(sum_wx2[i]) - weight * mean * mean, 0.0) / ((groups - 1) * weight)
+            x = indirect_scale * p
+            if level.shape[0] > 0:
+                c_sum = 0.0
+                for c in range(channels):
+                    c_sum += np.float64(level[i, c])
+                x += level_scale * (c_sum / channels)
+            total += x
+        spread[m] = s
+        luminance[m] = total
 
 
 class BatchNoise:
@@ -65,29 +92,25 @@ class BatchNoise:
         spread = np.maximum(self.sum_wx2[start:stop].astype(np.float64) - self.weight * mean * mean, 0.0)
         return spread / ((self.groups - 1) * self.weight)
 
-    def relative(self, lightmaps, luminance, chunk: int = 1 << 20) -> dict:
+    def relative(self, lightmaps, level: np.ndarray, level_scale: float = 1.0, indirect_scale: float = 0.0) -> dict:
         """{object name: relative noise} of each lightmap: the RMS over its texels of the standard
         deviation, over the mean irradiance of every texel of the bake (the scene's light), so that
         a dim object's noise is not magnified by its own darkness, nor a small object's by its
-        few texels. Empty when it cannot be measured (`unmeasured` says why). `luminance(start,
-        stop)`: the full estimate's (direct + indirect) mean over channels at texels start:stop,
-        float64. Chunk by chunk: no temporaries the size of the bake (at 2048² the noise is read
-        after every block of batches, and a whole-bake float64 RGB copy is 80 MB)."""
+        few texels. Empty when it cannot be measured (`unmeasured` says why). The luminance at a
+        texel is `level_scale` × the mean of `level`'s channels there ((N, C), or no rows for
+        none) plus `indirect_scale` × the indirect sums so far (`previous`). One compiled pass,
+        no temporaries the size of the bake: it is read after every block of batches."""
         if self.groups < 2:
             return {}
         first = np.array([lm.offset for lm in lightmaps], np.int64)
         end = first + np.array([lm.count for lm in lightmaps], np.int64)
-        spread, level = np.zeros(len(lightmaps)), np.zeros(len(lightmaps))
-        # Chunks of the bake's texels, each lightmap's share of a chunk summed from its running sums:
-        # a level of 1,500 small lightmaps reads its noise in a few numpy calls, not 1,500 × 4.
-        for start in range(int(first.min(initial=0)), int(end.max(initial=0)), chunk):
-            stop = min(start + chunk, int(end.max()))
-            lo, hi = np.clip(first - start, 0, stop - start), np.clip(end - start, 0, stop - start)
-            for out, values in ((spread, self.variance(start, stop)), (level, luminance(start, stop))):
-                running = np.concatenate([[0.0], np.cumsum(values, dtype=np.float64)])
-                out += running[hi] - running[lo]
+        spread, luminance = np.zeros(len(lightmaps)), np.zeros(len(lightmaps))
+        level = np.asarray(level)
+        _lightmap_sums(first, end, self.previous, self.sum_wx2, float(self.weight), self.groups,
+                       level[:, None] if level.ndim == 1 else level, float(level_scale), float(indirect_scale),
+                       spread, luminance)
         count = int((end - first).sum())
-        mean = float(level.sum()) / count if count else 0.0
+        mean = float(luminance.sum()) / count if count else 0.0
         if not mean > 0.0:
             return {}
         return {lm.name: float(np.sqrt(max(v, 0.0) / lm.count) / mean) if lm.count else 0.0

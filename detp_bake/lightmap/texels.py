@@ -1,4 +1,4 @@
-"""Lightmap texels: which surface point each texel stands for, and filling the gutter afterwards.
+"""Lightmap texels: which surface point each texel stands for (the gutter is filled by dilation.py).
 
 Rasterisation is conservative: a texel counts as covered when its square can touch a UV triangle
 (centre within half a diagonal of it), so texels along chart borders are baked too and no black
@@ -502,50 +502,6 @@ def to_image(values: np.ndarray, lm: Lightmap, pixel: np.ndarray) -> tuple[np.nd
     img[pixel] = values
     mask[pixel] = True
     return img.reshape(lm.height, lm.width, c), mask.reshape(lm.height, lm.width)
-
-
-@numba.njit(cache=True)
-def _dilate(img, filled, margin):
-    """In place: `margin` rings, each empty texel next to filled ones taking their mean (float32
-    sums in neighbour order, as numpy's shifted sums gave); a ring reads only the texels filled
-    before it, so one image and two masks are all it needs."""
-    h, w, channels = img.shape
-    grown = filled.copy()
-    acc = np.zeros(channels, np.float32)
-    for _ in range(margin):
-        changed = False
-        for y in range(h):
-            for x in range(w):
-                if filled[y, x]:
-                    continue
-                acc[:] = 0.0
-                cnt = np.float32(0.0)
-                for dy in range(-1, 2):
-                    for dx in range(-1, 2):
-                        yy, xx = y + dy, x + dx
-                        if (dy == 0 and dx == 0) or yy < 0 or yy >= h or xx < 0 or xx >= w or not filled[yy, xx]:
-                            continue
-                        for c in range(channels):
-                            acc[c] += img[yy, xx, c]
-                        cnt += np.float32(1.0)
-                if cnt > 0:
-                    for c in range(channels):
-                        img[y, x, c] = acc[c] / cnt
-                    grown[y, x] = True
-                    changed = True
-        if not changed:
-            break
-        filled[:] = grown
-
-
-def dilate(image: np.ndarray, mask: np.ndarray, margin: int, in_place: bool = False) -> np.ndarray:
-    """Grow covered texels outwards by `margin` pixels: each empty texel next to covered ones
-    takes their mean, ring by ring, as Blender's bake margin (extend) does. `in_place`: grow
-    `image` itself when it is float32 (no copy), else a copy."""
-    img = image if in_place and image.dtype == np.float32 else image.astype(np.float32, copy=True)
-    if img.shape[0] and img.shape[1] and not mask.all():
-        _dilate(img, np.array(mask, np.bool_), int(margin))
-    return img
 
 
 def resolution_for_density(positions: np.ndarray, uvs: np.ndarray, texels_per_metre: float,

@@ -14,7 +14,7 @@ its surface (LIFT texel sizes above it, as far as its square reaches):
   it is moved to (Godot's lightmapper "unoccludes" its texels the same way);
 - the nearest face met (after the move, the face it moved across) cuts the texel's square along a
   line, and only the side of the sample point counts: direct light's shadow rays start there
-  (texel_area.area_point), photon landings on the other side are left out and the texel's area is
+  (texel_area.square_point), photon landings on the other side are left out and the texel's area is
   the area of surface on its side (texel histogram): of every triangle in its square, clipped to
   the square and to the cut lines' planes, as the landings are tested (`_near_areas`).
 One cut a texel: in a corner where two walls cross one square, the nearer one.

@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import estimators
 from ..errors import BakeError
-from ..lightmap import denoise as denoise_mod, sh, texels as texels_mod
+from ..lightmap import denoise as denoise_mod, dilation, sh, texels as texels_mod
 
 
 def check(settings, names, frame_state=None) -> None:
@@ -57,7 +57,7 @@ def shadowmask_images(result, mask) -> None:
     for lm in texels.lightmaps:
         img, m = texels_mod.to_image(mask[lm.texels], lm, texels.pixel[lm.texels])
         img[..., len(lights):] = 1.0  # unused channels: nothing shadowed
-        result.shadowmask_images[lm.name] = texels_mod.dilate(img, m, settings.margin)
+        result.shadowmask_images[lm.name] = dilation.dilate(img, m, settings.margin)
     result.shadowmask = {"lights": lights, "mode": settings.shadowmask_mode, "channels": ["R", "G", "B", "A"],
                          "direct_left_out": settings.shadowmask_mode == "subtract"}
 
@@ -88,7 +88,7 @@ def make_images(result, l1, plan=None, sharp=None) -> None:
         if denoise:
             out = _denoised(settings, texels, lm, pixel, mask, raw0, raw1, plan, sharp)
         else:
-            out = texels_mod.dilate(raw1, mask, settings.margin)
+            out = dilation.dilate(raw1, mask, settings.margin)
         l0 = result.images[lm.name]
         layered = sh.from_layout(out)
         changed |= sh.clamp(l0, layered)  # against the lightmap as written, gutter included
@@ -125,7 +125,7 @@ def _denoised(settings, texels, lm, pixel, mask, raw0, raw1, plan, sharp) -> np.
         base = run(raw0)
         out = np.concatenate([run(raw0 + raw1[..., 3 * a:3 * a + 3]) - base for a in range(3)], axis=-1)
     if kept is not None:
-        out += texels_mod.dilate(kept, mask, settings.margin)
+        out += dilation.dilate(kept, mask, settings.margin)
     return out
 
 

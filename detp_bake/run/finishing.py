@@ -16,7 +16,7 @@ from typing import Optional
 import numpy as np
 
 from .. import estimators
-from ..lightmap import denoise as denoise_mod, fragments as fragments_mod, texels as texels_mod, validity
+from ..lightmap import denoise as denoise_mod, dilation, fragments as fragments_mod, texels as texels_mod, validity
 
 # From this many pixels a lightmap's soft direct light (area lights, emissive meshes, the sky) and its
 # indirect light are denoised together: one OIDN run instead of two, where OIDN costs more than the
@@ -98,7 +98,7 @@ class Finishing:
                 out.images[lm.name], mask = self._denoised(lm, value, counters)
             else:
                 img, mask = texels_mod.to_image(value[lm.texels], lm, pixel)
-                out.images[lm.name] = texels_mod.dilate(img, mask, settings.margin, in_place=True)
+                out.images[lm.name] = dilation.dilate(img, mask, settings.margin, in_place=True)
             out.masks[lm.name] = mask
             out.centre_masks[lm.name] = centre = np.zeros_like(mask)
             at_centre = texels.centre_inside[lm.texels]
@@ -152,5 +152,5 @@ class Finishing:
             out = denoised(image(parts.pop(0)))
             out += denoised(image(parts.pop()))
         if self.sharp is not None:
-            out += texels_mod.dilate(image(per_texel(self.sharp)), mask, margin, in_place=True)
+            out += dilation.dilate(image(per_texel(self.sharp)), mask, margin, in_place=True)
         return out

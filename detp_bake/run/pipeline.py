@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Optional
@@ -48,6 +49,7 @@ from .results import BakeResult, Progress, RawImages, Snapshot, cancel_fn, si
 from .settings import BakeSettings
 
 RAYS_PER_SECOND = 2.0e6  # photon segments traced a second and thread, for the time a bake announces
+_NO_LEVEL = np.zeros((0, 3), np.float32)  # no direct light in the noise's luminance (noise.BatchNoise.relative)
 
 
 @dataclass
@@ -145,8 +147,12 @@ class Pipeline:
 
     def run(self, reach_of=None) -> dict:
         lay = self.lay_out(reach_of)
-        plan = self.plan_denoising(lay)
-        light = self.direct_light(lay)
+        # The denoiser's plan (mostly one core's work) beside the direct light (every core's): neither
+        # reads what the other makes.
+        with ThreadPoolExecutor(1) as beside:
+            planned = beside.submit(self.plan_denoising, lay)
+            light = self.direct_light(lay)
+            plan = planned.result()
         est = self.build_estimators(lay)
         traced = self.trace(lay, light, est)
         results = self.results(lay, plan, light, est, traced)
@@ -195,7 +201,6 @@ class Pipeline:
         neighbours (finishing.plan); nothing without denoising."""
         if not (self.settings.denoise and denoise_mod.available()):
             return Denoising()
-        self.report(Progress("prepare", 0.0, "Finding the denoiser's regions and fragments"))
         plan = plan_denoising(lay.texels, self.scene, lay.caster, self.threads, self.settings.photons)
         lay.seconds["validity"] += plan.seconds["regions"]
         lay.seconds["fragments"] = plan.seconds["fragments"]
@@ -267,7 +272,7 @@ class Pipeline:
         the noise target) says enough; then the sums are the estimators'."""
         tracer, noise = lay.tracer, est.noise
         primary, total = self.names[0], tracer.photons
-        direct_at = None if light.e is None else lay.sites.of_sites(light.e)
+        direct_at = _NO_LEVEL if light.e is None else lay.sites.of_sites(light.e)
         traced = Traced("photons", {}, contextlib.ExitStack())  # its aside is closed by `results`
         totals = Totals(self.names)
         shown = [0]
@@ -288,8 +293,7 @@ class Pipeline:
                 for name in noise:
                     noise[name].update(totals.sums[name]["irradiance"], share)
                 if primary in noise and noise[primary].groups >= 2:
-                    traced.current = noise[primary].relative(
-                        lay.at.lightmaps, partial(_luminance_so_far, direct_at, noise[primary], share))
+                    traced.current = noise[primary].relative(lay.at.lightmaps, direct_at, 1.0, 1.0 / max(share, 1e-300))
                 trace_progress(totals.stats.photons)
                 self.check_cancel()
                 self._show(lay, light, est, traced, totals, share)
@@ -405,7 +409,7 @@ class Pipeline:
         # The noise sums go before the images are made (two float32s a texel).
         noise = est.noise.pop(name, None)
         if noise is not None:  # (relative noise, why there is none)
-            measured = noise.relative(lay.at.lightmaps, partial(_luminance, sites.of_sites(value), np.pi))
+            measured = noise.relative(lay.at.lightmaps, sites.of_sites(value), np.pi)
             noise = measured, "" if measured else noise.unmeasured(lay.tracer.stats.photons)
         result = self._images(name, kind, lay, plan, light, value, out.counters, seconds, last=l1 is None)
         out = value = None
@@ -494,22 +498,6 @@ def indirect_spacing(settings: BakeSettings, frame_state=None) -> int:
     if settings.direct != "sampled" or frame_state is not None:
         return 1
     return int(settings.indirect_spacing)
-
-
-def _luminance(per_texel, scale, start, stop) -> np.ndarray:
-    """The mean over channels of rows start:stop of `per_texel` times `scale`, in float64."""
-    lum = np.mean(per_texel[start:stop], axis=1, dtype=np.float64)
-    lum *= scale
-    return lum
-
-
-def _luminance_so_far(direct_at, noise, share, start, stop) -> np.ndarray:
-    """The luminance of the bake so far at sites start:stop: the direct light and the indirect
-    sums scaled to the whole bake (`share` of it traced), for the noise shown while tracing."""
-    lum = noise.previous[start:stop].astype(np.float64) / max(share, 1e-300)
-    if direct_at is not None:
-        lum += np.mean(direct_at[start:stop], axis=1, dtype=np.float64)
-    return lum
 
 
 def _snapshot_value(sites, current, direct_e, share) -> np.ndarray:

@@ -10,7 +10,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from .. import __version__
-from ..lightmap import texels as texels_mod
+from ..lightmap import dilation, texels as texels_mod
 from ..transport.photons import TraceStats
 from .settings import BakeSettings
 
@@ -39,7 +39,7 @@ class RawImages(Mapping):
         if lm is None:
             raise KeyError(name)
         img, mask = texels_mod.to_image(self._value[lm.texels], lm, self._texels.pixel[lm.texels])
-        return texels_mod.dilate(img, mask, self._margin, in_place=True)
+        return dilation.dilate(img, mask, self._margin, in_place=True)
 
     def __iter__(self):
         return iter(self._names)
@@ -191,7 +191,7 @@ def preview_images(texels: texels_mod.TexelSet, value: np.ndarray, margin: int) 
     out = {}
     for lm in texels.lightmaps:
         img, mask = texels_mod.to_image(value[lm.texels], lm, texels.pixel[lm.texels])
-        out[lm.name] = texels_mod.dilate(img, mask, margin).astype(np.float32, copy=False)
+        out[lm.name] = dilation.dilate(img, mask, margin).astype(np.float32, copy=False)
     return out
 
 

@@ -4,7 +4,7 @@ classic two-pass split; docs/design.md, Denoising).
 Direct light holds the hard shadows and most of the energy, and a density estimate blurs it over its
 disc. Sampled here, it has no blur at all. Each ray starts at its own point of the texel's middle,
 as Cycles' bake jitters a texel (texel_area.py): a point light or a sharp sun takes FIRST_SAMPLES
-rays per texel, from the corners of its square (texel_area.probe_point: no straight edge crossing
+rays per texel, from the corners of its square (texel_area.square_corner: no straight edge crossing
 it goes unseen), and where those disagree (a shadow edge or a spot's rim in the texel) `samples`
 more, stratified over the square, which alone give its value;
 a light with extent `samples` stratified rays (a Hammersley set, rotated per texel and light by a
@@ -51,7 +51,7 @@ from .environment import environment_rays
 from .scattering import MAX_PASSES
 from ..scene import Scene
 from .textures import opacity_at, surfaces
-from ..lightmap.texel_area import PROBES, area_point, probe_point, texel_squares
+from ..lightmap.texel_area import PROBES, square_corner, square_of, square_point, texel_squares
 from ..lightmap.texels import geometric_normals
 
 CHUNK = 2048  # texels per work item
@@ -70,7 +70,7 @@ def _shadow_rays(kind, prm, j0, samples, stride, sel, counts, key, ids, a, b, po
     spot cone) are left out. Returns the ray count. Samples j0 … j0 + samples − 1 of `stride`, for
     the texels `sel` when it is not empty (a top-up: direct_lights); `counts`, when not empty, is
     each texel's own number of samples instead (the light's share of them: light_shares). `probe`:
-    samples 0 … PROBES − 1 start at the corners of the texel's square (texel_area.probe_point), for
+    samples 0 … PROBES − 1 start at the corners of the texel's square (texel_area.square_corner), for
     a light that adds rays where its first ones disagree."""
     k = 0
     todo = sel.shape[0] if sel.shape[0] > 0 else b - a
@@ -84,13 +84,12 @@ def _shadow_rays(kind, prm, j0, samples, stride, sel, counts, key, ids, a, b, po
         gx, gy, gz = geo[i, 0], geo[i, 1], geo[i, 2]
         state, r0, r1 = uniform2(photon_rng(key, ids[i]))
         state, q0, q1 = uniform2(state)
+        sq = square_of(spread, i, sq_tri, sq_cx, sq_cy, sq_w, sq_h, cut_of, cut_p, cut_n, uvs, positions, pos)
         for j in range(j0, j0 + samples):
             if probe and j < PROBES:
-                px, py, pz = probe_point(spread, i, j, stride, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h,
-                                         cut_of, cut_p, cut_n, uvs, positions, pos)
+                px, py, pz = square_corner(sq, j, stride, q0, q1)
             else:
-                px, py, pz = area_point(spread, i, j, stride, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h,
-                                        cut_of, cut_p, cut_n, uvs, positions, pos)
+                px, py, pz = square_point(sq, j, stride, q0, q1)
             ox, oy, oz = px + eps * gx, py + eps * gy, pz + eps * gz
             u0 = (j + 0.5) * inv_s + r0
             u0 -= math.floor(u0)

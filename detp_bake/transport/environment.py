@@ -18,7 +18,7 @@ import numpy as np
 from .footprint import sky_areas, sky_start
 from .emitter import Emitter
 from ..sampling import inline, jit, photon_rng, search_cdf, uniform2
-from ..lightmap.texel_area import area_point
+from ..lightmap.texel_area import square_of, square_point
 
 
 @dataclass
@@ -137,6 +137,7 @@ def environment_rays(marginal, cond, prob, rot, pixels, samples, key, ids, a, b,
         gx, gy, gz = geo[i, 0], geo[i, 1], geo[i, 2]
         state, r0, r1 = uniform2(photon_rng(key, ids[i]))
         state, q0, q1 = uniform2(state)
+        sq = square_of(spread, i, sq_tri, sq_cx, sq_cy, sq_w, sq_h, cut_of, cut_p, cut_n, uvs, positions, pos)
         for j in range(samples):
             u0 = (j + 0.5) * inv_s + r0
             u0 -= math.floor(u0)
@@ -148,8 +149,7 @@ def environment_rays(marginal, cond, prob, rot, pixels, samples, key, ids, a, b,
             if cos_x <= 0.0 or x * gx + y * gy + z * gz <= 0.0 or pdf <= 0.0:
                 continue
             scale = cos_x / pdf * inv_s
-            sx, sy, sz = area_point(spread, i, j, samples, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h,
-                                    cut_of, cut_p, cut_n, uvs, positions, pos)
+            sx, sy, sz = square_point(sq, j, samples, q0, q1)
             o[k, 0], o[k, 1], o[k, 2] = sx + eps * gx, sy + eps * gy, sz + eps * gz
             d[k, 0], d[k, 1], d[k, 2] = x, y, z
             t[k] = 1e37

@@ -23,7 +23,7 @@ import numba
 import numpy as np
 
 from .direct_lights import POINT, SHARP_KINDS, light_ray, light_weight, radical_inverse2
-from ..lightmap.texel_area import area_point
+from ..lightmap.texel_area import square_of, square_point
 from ..sampling import jit, photon_rng, search_cdf, seed_key, uniform2
 
 MANY_LIGHTS = 16  # more point, spot, sun and area lights than this: sampled per texel
@@ -95,6 +95,7 @@ def many_rays(kinds, params, counts, sharp_kind, samples, key, ids, n, pos, nrm,
         total = _sum(weight)
         if not total > 0.0:
             continue
+        sq = square_of(spread, i, sq_tri, sq_cx, sq_cy, sq_w, sq_h, cut_of, cut_p, cut_n, uvs, positions, pos)
         state = photon_rng(key, ids[i])
         rest = 0.0
         for q in range(m):
@@ -104,8 +105,7 @@ def many_rays(kinds, params, counts, sharp_kind, samples, key, ids, n, pos, nrm,
                 state, q0, q1 = uniform2(state)
                 c = counts[q]
                 for j in range(c):
-                    px, py, pz = area_point(spread, i, j, c, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h,
-                                            cut_of, cut_p, cut_n, uvs, positions, pos)
+                    px, py, pz = square_point(sq, j, c, q0, q1)
                     ox, oy, oz = px + eps * gx, py + eps * gy, pz + eps * gz
                     u0 = (j + 0.5) / c + r0
                     u1 = radical_inverse2(j) + r1
@@ -126,8 +126,7 @@ def many_rays(kinds, params, counts, sharp_kind, samples, key, ids, n, pos, nrm,
         state, r0, r1 = uniform2(state)
         state, q0, q1 = uniform2(state)
         for j in range(samples):
-            px, py, pz = area_point(spread, i, j, samples, q0, q1, sq_tri, sq_cx, sq_cy, sq_w, sq_h,
-                                    cut_of, cut_p, cut_n, uvs, positions, pos)
+            px, py, pz = square_point(sq, j, samples, q0, q1)
             ox, oy, oz = px + eps * gx, py + eps * gy, pz + eps * gz
             q = min(search_cdf(cdf, (j + r0) / samples * rest), m - 1)  # stratified over the weights
             state, u0, u1 = uniform2(state)
