@@ -7,7 +7,7 @@ import pytest
 
 from detp_bake.components import connected_components, label_boxes
 from detp_bake.distance_transform import distance_transform
-from detp_bake.kdtree import KDTree
+from detp_bake.kdtree import KDTree, query_groups
 
 csgraph = pytest.importorskip("scipy.sparse.csgraph")
 sparse = pytest.importorskip("scipy.sparse")
@@ -67,6 +67,29 @@ def test_kdtree_gives_ckdtrees_neighbours_in_its_order(kind, balanced):
             want_d, want_i = theirs.query(queries, k=k, distance_upper_bound=bound)
             np.testing.assert_array_equal(idx, want_i.reshape(idx.shape), err_msg=f"{kind} n={n} k={k}")
             np.testing.assert_array_equal(dist, want_d.reshape(dist.shape))
+
+
+def test_query_groups_asks_each_groups_own_tree():
+    """query_groups over groups of every kind, some lying on each other, some empty or not asked:
+    what a KDTree of each group alone gives, its indices shifted by the group's start."""
+    rng = np.random.default_rng(3)
+    parts = [_cloud(("random", "lattice", "grid")[g % 3], n, rng) for g, n in enumerate([1, 0, 17, 600, 5, 2500, 40, 3])]
+    sizes = [len(p) for p in parts]  # a grid of n points rounds up to a square
+    start = np.cumsum([0] + sizes[:-1])
+    k = np.minimum(24, np.maximum(sizes, 1))
+    bound = np.array([np.inf, 1.0, 0.3, 0.2, np.inf, 0.5, 1.0, 0.1])
+    asked = [g for g in range(len(sizes)) if sizes[g] and g != 6]
+    x = [np.concatenate([parts[g][rng.integers(0, sizes[g], 20)], rng.random((5, 3)) * 3]) for g in asked]
+    group = np.repeat(asked, [len(q) for q in x])
+    dist, idx = query_groups(np.concatenate(parts), start, sizes, np.concatenate(x), group, k, bound)
+    assert dist.shape == idx.shape == (len(group), 24)
+    for g, q in zip(asked, x):
+        rows = group == g
+        want_d, want_i = KDTree(parts[g]).query(q, k[g], distance_upper_bound=bound[g])
+        got_i = np.where(idx[rows] < sum(sizes), idx[rows] - start[g], sizes[g])
+        np.testing.assert_array_equal(got_i[:, :k[g]], want_i, err_msg=f"group {g}")
+        np.testing.assert_array_equal(dist[rows, :k[g]], want_d)
+        assert np.isinf(dist[rows, k[g]:]).all() and (idx[rows, k[g]:] == sum(sizes)).all()
 
 
 def test_kdtree_with_no_points_or_no_queries():

@@ -88,6 +88,27 @@ def test_fragments_are_the_narrow_charts_and_their_neighbours_see_each_other():
     assert fragments.find(ts1, ts1.lightmaps[0], one, RayCaster(one.positions)) is None
 
 
+def test_fragments_of_every_lightmap_at_once_are_each_ones_own():
+    """fragments.find_all over three lightmaps, two fragmented planes lying on each other (every
+    texel has a nearer texel of the other lightmap than of its own) and one clean plane: each
+    lightmap's fragments exactly as found alone (find), no neighbour taken across lightmaps."""
+    from detp_bake.lightmap import fragments, texels as texels_mod
+    from detp_bake.rays import RayCaster
+
+    scene = make_scene([("A", _charts(), 0.5, True), ("B", shuffled_charts(SIZE, CELLS, seed=5), 0.5, True),
+                        ("Clean", grid(SIZE, SIZE, CELLS, z=1.0), 0.5, True)], [], resolution=32)
+    ts = texels_mod.rasterise(scene)
+    caster = RayCaster(scene.positions)
+    every = fragments.find_all(ts, scene, caster, threads=2, starved={"B"})
+    assert list(every) == ["A", "B", "Clean"] and every["Clean"] is None
+    for lm in ts.lightmaps[:2]:
+        alone = fragments.find(ts, lm, scene, caster, starved=lm.name == "B")
+        assert len(alone) == lm.count
+        for part in ("pixel", "neighbour", "weight"):
+            np.testing.assert_array_equal(getattr(every[lm.name], part), getattr(alone, part))
+        assert (every[lm.name].weight[:, 1:] > 0).mean() > 0.9  # neighbours of its own found
+
+
 def test_a_sealed_room_on_fragmented_ground_is_dark_inside():
     """The sealed room of test_validity on ground cut into 4-texel charts: the fragment texels'
     means must not reach through the walls (every neighbour is behind a ray test)."""

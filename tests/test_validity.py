@@ -126,6 +126,26 @@ def test_cuts_under_a_box_and_beside_a_one_sided_wall():
     assert labels.max() >= 1
 
 
+def test_regions_of_every_lightmap_at_once_are_each_ones_own():
+    """validity.all_regions on a baked plate and a baked box standing on it (both cut where they
+    meet) and a box that touches nothing: each lightmap with a cut labelled as `regions` labels it
+    alone, the lightmaps without one left out."""
+    scene = make_scene([("Ground", grid(4.0, 4.0, 4), 0.5, True),
+                        ("Box", box((-0.5, -0.5, 0.0), (0.5, 0.5, 1.0)), 0.5, True),
+                        ("Far", box((5.0, 5.0, 3.0), (5.5, 5.5, 3.5)), 0.5, True)], [], resolution=32)
+    texels = texels_mod.rasterise(scene)
+    caster = RayCaster(scene.positions)
+    cuts = texels.cuts = validity.find_cuts(texels, scene, caster)
+    every = validity.all_regions(texels, cuts, caster, scene, threads=2)
+    assert list(every) == ["Ground", "Box"]
+    for lm in texels.lightmaps[:2]:
+        alone = validity.regions(texels, lm, cuts, caster, scene)
+        np.testing.assert_array_equal(every[lm.name], alone)
+        assert every[lm.name].dtype == np.int32
+        assert (every[lm.name].reshape(-1)[texels.pixel[lm.texels]] >= 0).all()  # every texel labelled
+    assert every["Ground"].max() == 1  # the ground under the box apart from the ground round it
+
+
 def test_a_cut_keeps_the_exact_share_of_its_square():
     """The texel histogram divides the landings on a cut texel's side by the area on that side: the
     share is the square's area on the side of the cut line, exactly. A 6 × 6 grid of points on the

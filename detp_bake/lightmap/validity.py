@@ -41,7 +41,7 @@ import numpy as np
 from ..bvh import TriangleTree
 from ..components import connected_components
 from ..sampling import inline
-from .texels import TexelSet, geometric_normals, lightmap_triangles, neighbour_pairs, pixel_steps
+from .texels import TexelSet, geometric_normals, lightmap_triangles, pixel_steps
 
 DIRECTIONS = 8  # probe rays per texel, in opposite pairs
 LIFT = 0.02  # probe height above the surface, in texel sizes
@@ -50,7 +50,7 @@ PUSH = 0.05  # how far past the face a moved sample point lands, in texel sizes
 STANDING = np.cos(np.radians(45.0))  # faces steeper than this against the texel's surface stand on it
 MIN_SHARE = 1.0 / 36  # the least share of its square's area a cut texel keeps
 CHUNK = 1 << 13  # texels a probe task casts rays for: ~10 MB of float64 temporaries a task running
-BLOCK = 1 << 18  # texels find_cuts holds float64 sizes, normals and discs for at once
+BLOCK = 1 << 18  # texels find_cuts holds float64 sizes, normals and discs for at once (all_regions: pairs)
 NEIGHBOURS = 3.0  # texel sizes: neighbours in the image further apart than this are not tested (regions)
 
 
@@ -191,13 +191,15 @@ def _clip(xs, ys, fs, n, bx, by):
 
 
 @numba.njit(cache=True)
-def _near_areas(uv, positions, world_area, width, height, texel_of, cut_of, cut_p, cut_n, out):
-    """out[c] += the world area of the triangles (UVs `uv` in 0..1, world `positions`) inside the
-    square of the texel with cut c (`texel_of` a pixel's texel, −1 for none) on that texel's side of
-    both its cut lines: what the texel histogram's landings are tested against (on_side)."""
+def _near_areas(uv, positions, world_area, sides, base, texel_of, cut_of, cut_p, cut_n, out):
+    """out[c] += the world area of the triangles (UVs `uv` in 0..1, world `positions`; in a lightmap
+    of `sides` (width, height) whose pixels' texels are texel_of[base:], −1 for none) inside the
+    square of the texel with cut c on that texel's side of both its cut lines: what the texel
+    histogram's landings are tested against (on_side)."""
     xs, ys, fs = np.empty(16), np.empty(16), np.empty(16)
     bx, by = np.empty(16), np.empty(16)
     for t in range(uv.shape[0]):
+        width, height = sides[t, 0], sides[t, 1]
         ax, ay = uv[t, 0, 0] * width, uv[t, 0, 1] * height
         ex, ey = uv[t, 1, 0] * width, uv[t, 1, 1] * height
         gx, gy = uv[t, 2, 0] * width, uv[t, 2, 1] * height
@@ -211,7 +213,7 @@ def _near_areas(uv, positions, world_area, width, height, texel_of, cut_of, cut_
         j1 = min(height - 1, int(np.floor(max(ay, max(ey, gy)))))
         for j in range(j0, j1 + 1):
             for i in range(i0, i1 + 1):
-                k = texel_of[j * width + i]
+                k = texel_of[base[t] + j * width + i]
                 if k < 0 or cut_of[k] < 0:
                     continue
                 c = cut_of[k]
@@ -257,13 +259,18 @@ def _shares(texels: TexelSet, scene, cuts: Cuts) -> np.ndarray:
     _, cut_p, cut_n = cuts.kernel_arrays()
     world_area = 0.5 * np.linalg.norm(np.cross(scene.positions[:, 1] - scene.positions[:, 0],
                                                scene.positions[:, 2] - scene.positions[:, 0]), axis=1)
-    for lm in texels.lightmaps:
-        sl = lightmap_triangles(scene, lm)
-        texel_of = np.full(lm.width * lm.height, -1, np.int32)  # 4 bytes a pixel, not 8: fewer than 2³¹ texels
-        texel_of[texels.pixel[lm.texels]] = np.arange(lm.offset, lm.offset + lm.count)
-        _near_areas(np.ascontiguousarray(scene.uvs[sl], np.float64), np.ascontiguousarray(scene.positions[sl], np.float64),
-                    np.ascontiguousarray(world_area[sl], np.float64), lm.width, lm.height, texel_of,
-                    np.ascontiguousarray(cuts.of), cut_p, cut_n, near)
+    # Every lightmap with a cut at once: each triangle reads the texels of its own lightmap's pixels.
+    lms = [texels.lightmaps[i] for i in _with_cuts(texels, cuts)]
+    tris = [lightmap_triangles(scene, lm) for lm in lms]
+    tri, own = np.concatenate(tris), np.repeat(np.arange(len(lms)), [len(t) for t in tris])
+    sides = np.array([[lm.width, lm.height] for lm in lms], np.int64)
+    base = np.cumsum([0] + [lm.width * lm.height for lm in lms])
+    node = np.concatenate([np.arange(lm.offset, lm.offset + lm.count) for lm in lms])
+    texel_of = np.full(int(base[-1]), -1, np.int32)  # 4 bytes a pixel, not 8: fewer than 2³¹ texels
+    texel_of[base[np.repeat(np.arange(len(lms)), [lm.count for lm in lms])] + texels.pixel[node]] = node
+    _near_areas(np.ascontiguousarray(scene.uvs[tri], np.float64), np.ascontiguousarray(scene.positions[tri], np.float64),
+                np.ascontiguousarray(world_area[tri], np.float64), sides[own], base[own].astype(np.int64), texel_of,
+                np.ascontiguousarray(cuts.of), cut_p, cut_n, near)
     owner = np.empty(len(near), np.int64)
     owner[cuts.of[cuts.of >= 0]] = np.flatnonzero(cuts.of >= 0)
     return np.clip(near / np.maximum(texels.area[owner].astype(np.float64), 1e-300), MIN_SHARE, 1.0)
@@ -291,18 +298,18 @@ class _Triangles(TriangleTree):
 
 
 def _subset(texels: TexelSet, rows) -> TexelSet:
-    """Texels `rows` (a slice: views, no copies; or ascending indices) as a TexelSet whose lightmaps
-    count only them, so that the per-texel helpers (pixel_steps) run on a block at a time."""
+    """Texels `rows` (a slice: views, no copies; or ascending indices) as a TexelSet of the lightmaps
+    that hold some of them, each counting only those, so that the per-texel helpers (pixel_steps)
+    run on a block at a time. Lightmaps with none are left out: a block of 1,500 small objects'
+    texels holds a few of them, and each one kept costs a copy of its Lightmap."""
+    start = np.array([lm.offset for lm in texels.lightmaps], np.int64)
+    end = start + np.array([lm.count for lm in texels.lightmaps], np.int64)
     if isinstance(rows, slice):
-        def before(k):
-            return min(max(k, rows.start), rows.stop) - rows.start
+        lo, hi = (np.clip(k, rows.start, rows.stop) - rows.start for k in (start, end))
     else:
-        def before(k):
-            return int(np.searchsorted(rows, k))
-    lightmaps = []
-    for lm in texels.lightmaps:
-        lo, hi = before(lm.offset), before(lm.offset + lm.count)
-        lightmaps.append(replace(lm, offset=lo, count=hi - lo))
+        lo, hi = np.searchsorted(rows, start), np.searchsorted(rows, end)
+    lightmaps = [replace(texels.lightmaps[i], offset=int(lo[i]), count=int(hi[i] - lo[i]))
+                 for i in np.flatnonzero(hi > lo)]
     return TexelSet(texels.position[rows], texels.normal[rows], texels.triangle[rows], texels.pixel[rows],
                     texels.area[rows], texels.centre_inside[rows], lightmaps)
 
@@ -390,12 +397,15 @@ def find_cuts(texels: TexelSet, scene, caster, threads: int = 1) -> Cuts:
     return cuts
 
 
-def blocked_between(texels: TexelSet, i: np.ndarray, j: np.ndarray, lift: float, caster, scene,
+def blocked_between(texels: TexelSet, i: np.ndarray, j: np.ndarray, lift, caster, scene,
                     threads: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """(whether a ray from texel i's sample point to texel j's, both lifted `lift` metres off their
-    faces, meets anything on the way; the rays' lengths) for the texel pairs (i, j)."""
+    """(whether a ray from texel i's sample point to texel j's, both lifted `lift` metres (one for
+    all, or one a pair) off their faces, meets anything on the way; the rays' lengths) for the
+    texel pairs (i, j)."""
     gi = geometric_normals(scene, texels.triangle[i], texels.normal[i])
     gj = geometric_normals(scene, texels.triangle[j], texels.normal[j])
+    lift = np.asarray(lift, np.float64)
+    lift = lift[:, None] if lift.ndim else lift
     a = texels.position[i] + lift * gi
     span = texels.position[j] + lift * gj - a
     length = np.linalg.norm(span, axis=1)
@@ -407,30 +417,87 @@ def regions(texels: TexelSet, lm, cuts: Cuts, caster, scene) -> np.ndarray:
     along the surface (0, 1, …; −1 in the gutter). Neighbours (8 ways) are linked unless a ray
     between their sample points, lifted off the surface, is blocked; only texels with a cut, less
     than NEIGHBOURS texels apart, can lose a link."""
-    sl = lm.texels
-    grid = np.full(lm.width * lm.height, -1, np.int64)
-    grid[texels.pixel[sl]] = np.arange(lm.count)
-    grid = grid.reshape(lm.height, lm.width)
-    cut = cuts.of[sl] >= 0
-    pairs = []
-    for a, b in neighbour_pairs(grid):
-        ok = (a >= 0) & (b >= 0)
-        pairs.append(np.stack([a[ok], b[ok]], axis=1))
-    pairs = np.concatenate(pairs)
+    at = next(i for i, m in enumerate(texels.lightmaps) if m.name == lm.name)
+    return _regions_of(texels, np.array([at]), cuts, caster, scene)[lm.name]
+
+
+def all_regions(texels: TexelSet, cuts: Cuts, caster, scene, threads: int = 1) -> dict:
+    """{name: `regions` of each lightmap with a cut texel}, found whole lightmaps at a time, about
+    BLOCK texels (their pairs take some 150 bytes a texel)."""
+    which = _with_cuts(texels, cuts)
+    ends = np.cumsum([0] + [texels.lightmaps[i].count for i in which])
+    bounds = np.unique(np.append(np.searchsorted(ends, np.arange(0, ends[-1], BLOCK), side="right") - 1, len(which)))
+    out = {}
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        out.update(_regions_of(texels, which[a:b], cuts, caster, scene, threads))
+    return out
+
+
+def _with_cuts(texels: TexelSet, cuts: Cuts) -> np.ndarray:
+    """Indices of the lightmaps with a cut texel, ascending."""
+    per = np.repeat(np.arange(len(texels.lightmaps)), [lm.count for lm in texels.lightmaps])
+    return np.flatnonzero(np.bincount(per[cuts.of >= 0], minlength=len(texels.lightmaps)))
+
+
+def _regions_of(texels: TexelSet, which: np.ndarray, cuts: Cuts, caster, scene, threads: int = 1) -> dict:
+    """`regions` of the lightmaps `which` (indices, ascending), all at once: their pairs of
+    neighbours from one grid of all their pixels, one call for the rays and one for the components
+    (1,500 small objects, a pass each, took a second). Components never cross lightmaps and are
+    numbered by their first texel, so each lightmap's labels run on from its first texel's."""
+    lms = [texels.lightmaps[i] for i in which]
+    count = np.array([lm.count for lm in lms], np.int64)
+    node = np.concatenate([np.arange(lm.offset, lm.offset + lm.count) for lm in lms]) if lms else np.zeros(0, int)
+    own = np.repeat(np.arange(len(lms)), count)
+    size = np.array([lm.texel_size for lm in lms], np.float64)
+    pixel = texels.pixel[node].astype(np.int64)
+    sides = np.array([[lm.width, lm.height] for lm in lms], np.int64).reshape(-1, 2)
+    pairs = _pairs(pixel, own, sides, np.cumsum([0] + [lm.width * lm.height for lm in lms]))
     keep = np.ones(len(pairs), bool)
+    cut = cuts.of[node] >= 0
     test = np.flatnonzero(cut[pairs[:, 0]] | cut[pairs[:, 1]])
     if test.size:
-        blocked, length = blocked_between(texels, pairs[test, 0] + lm.offset, pairs[test, 1] + lm.offset,
-                                          LIFT * lm.texel_size, caster, scene)
+        i, j = pairs[test, 0], pairs[test, 1]
+        own_size = size[own[i]]
+        blocked, length = blocked_between(texels, node[i], node[j], LIFT * own_size, caster, scene, threads)
         # Neighbours in the image that lie far apart on the surface are two charts side by side in
         # the atlas: the denoiser has always seen them as one image, and no wall is to blame.
-        near = (length > 0) & (length < NEIGHBOURS * lm.texel_size)
+        near = (length > 0) & (length < NEIGHBOURS * own_size)
         keep[test[blocked & near]] = False
     links = pairs[keep]
-    _, label = connected_components(lm.count, links[:, 0], links[:, 1])
-    out = np.full(lm.width * lm.height, -1, np.int32)
-    out[texels.pixel[sl]] = label
-    return out.reshape(lm.height, lm.width)
+    _, label = connected_components(len(node), links[:, 0], links[:, 1])
+    out, at = {}, 0
+    for lm in lms:
+        image = np.full(lm.width * lm.height, -1, np.int32)
+        if lm.count:
+            image[pixel[at:at + lm.count]] = label[at:at + lm.count] - label[at]
+        out[lm.name] = image.reshape(lm.height, lm.width)
+        at += lm.count
+    return out
+
+
+@numba.njit(cache=True)
+def _pairs(pixel, own, sides, base):
+    """(P, 2) the pairs (a, b) of texels (rows of `pixel`, each a pixel of lightmap own[a], whose
+    sides[own[a]] are its width and height and whose pixels are numbered on from base[own[a]])
+    that are 8-neighbours in their image, each pair once: b right of a, above it, above and right,
+    or above and left."""
+    n = pixel.shape[0]
+    grid = np.full(base[-1], -1, np.int32)  # 4 bytes a pixel: fewer than 2³¹ texels
+    for a in range(n):
+        grid[base[own[a]] + pixel[a]] = a
+    step_x, step_y = np.array([1, 0, 1, -1]), np.array([0, 1, 1, 1])
+    out = np.empty((4 * n, 2), np.int64)
+    m = 0
+    for a in range(n):
+        w, h = sides[own[a], 0], sides[own[a], 1]
+        x, y = pixel[a] % w, pixel[a] // w
+        for d in range(4):
+            if 0 <= x + step_x[d] < w and y + step_y[d] < h:
+                b = grid[base[own[a]] + pixel[a] + step_y[d] * w + step_x[d]]
+                if b >= 0:
+                    out[m, 0], out[m, 1] = a, b
+                    m += 1
+    return out[:m].copy()
 
 
 def by_object(texels: TexelSet, lm, scene, regions=None) -> np.ndarray:

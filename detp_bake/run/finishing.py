@@ -42,15 +42,16 @@ def plan(texels, scene, caster, threads: int, photons: int = 0) -> Denoising:
     fragments too (fragments.starved_lightmaps)."""
     out = Denoising()
     t0 = time.perf_counter()
+    found = {} if texels.cuts is None else validity.all_regions(texels, texels.cuts, caster, scene, threads)
     for lm in texels.lightmaps:
-        if texels.cuts is not None and (texels.cuts.of[lm.texels] >= 0).any():
-            out.regions[lm.name] = validity.regions(texels, lm, texels.cuts, caster, scene)
+        labels = found.get(lm.name)
         if len(lm.members) > 1:
-            out.regions[lm.name] = validity.by_object(texels, lm, scene, out.regions.get(lm.name))
+            labels = validity.by_object(texels, lm, scene, labels)
+        if labels is not None:
+            out.regions[lm.name] = labels
     t1 = time.perf_counter()
     starved = fragments_mod.starved_lightmaps(texels, scene, photons)
-    out.fragments = {lm.name: fragments_mod.find(texels, lm, scene=scene, caster=caster, threads=threads,
-                                                 starved=lm.name in starved) for lm in texels.lightmaps}
+    out.fragments = fragments_mod.find_all(texels, scene, caster, threads, starved)
     out.seconds = {"regions": t1 - t0, "fragments": time.perf_counter() - t1}
     return out
 
