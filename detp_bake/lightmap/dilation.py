@@ -53,13 +53,15 @@ def _dilate(img, filled, margin):
 @numba.njit(cache=True, parallel=True)
 def _dilate_wide(img, filled, margin):
     """`_dilate` with a ring's rows on every core (they are independent): the same image, for
-    images big enough to repay starting the threads (WIDE)."""
+    images big enough to repay starting the threads (WIDE). Each row's count goes to its own
+    slot (no reduction across threads)."""
     grown = filled.copy()
+    rows = np.zeros(img.shape[0], np.int64)
     for _ in range(margin):
-        changed = 0
         for y in numba.prange(img.shape[0]):
-            changed += _dilate_row(img, filled, grown, y, np.zeros(img.shape[2], np.float32))
-        if changed == 0:
+            acc = np.zeros(img.shape[2], np.float32)
+            rows[y] = _dilate_row(img, filled, grown, y, acc)
+        if rows.sum() == 0:
             break
         filled[:] = grown
 
