@@ -50,7 +50,7 @@ STARVED_WIDTH = 32.0  # texels: a starved lightmap's charts narrower than this s
 # cleans best: a 64-texel plane at 10 photons a texel, 7.9 % per texel by OIDN, 10.5 % smoothed)
 LIFT = 0.25  # texel sizes: rays between neighbours pass this far above the surface (over a convex curve's chord)
 CHUNK = 1 << 16  # fragment texels whose neighbours' normals are held at once (40 MB)
-BATCH = 1 << 18  # fragment texels (of whole lightmaps) found at once: 50 MB an (F, K) float64 array
+BATCH = 1 << 15  # fragment texels (of whole lightmaps) found at once: 6 MB an (F, K) float64 array
 
 
 @dataclass
