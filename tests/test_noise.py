@@ -106,3 +106,33 @@ def test_the_threads_setting_reaches_the_compiled_estimators():
         pipeline.Pipeline.run = original
     assert seen == [1, before] and numba.get_num_threads() == before
     assert np.array_equal(one.value, every.value)
+
+
+def test_noise_read_while_tracing_is_the_spread_over_the_bakes_light_so_far():
+    """BatchNoise.relative with the indirect sums so far scaled to the whole bake and the direct
+    light added (what a bake shows while tracing): per lightmap, the RMS of the block spread's
+    standard deviation over the mean of that luminance, as numpy computes it texel by texel."""
+    from types import SimpleNamespace
+    from detp_bake.lightmap.noise import BatchNoise
+    rng = np.random.default_rng(7)
+    n, blocks = 300, 5
+    truth = rng.uniform(0.2, 2.0, n)
+    shares = np.full(blocks, 1.0 / 8)  # 5 of 8 eighths traced
+    estimates = truth + rng.normal(0.0, 0.1, (blocks, n))  # each block's estimate of the whole bake
+    noise = BatchNoise(n)
+    running = np.zeros(n)
+    for g in range(blocks):
+        running += shares[g] * estimates[g]
+        noise.update(np.repeat(running[:, None], 3, axis=1), shares[:g + 1].sum())
+    direct = rng.uniform(0.0, 1.0, (n, 3)).astype(np.float32)
+    lightmaps = [SimpleNamespace(name="A", offset=0, count=120), SimpleNamespace(name="B", offset=120, count=180)]
+    share = shares.sum()
+    got = noise.relative(lightmaps, direct, 1.0, 1.0 / share)
+    w, x = shares, estimates
+    mean = (w[:, None] * x).sum(axis=0) / share
+    var = (w[:, None] * (x - mean) ** 2).sum(axis=0) / ((blocks - 1) * share)
+    level = (running / share + direct.astype(np.float64).mean(axis=1)).mean()
+    for lm in lightmaps:
+        sl = slice(lm.offset, lm.offset + lm.count)
+        assert got[lm.name] == pytest.approx(np.sqrt(var[sl].mean()) / level, rel=1e-4), lm.name
+    assert 0.01 < got["A"] < 0.2
