@@ -152,6 +152,8 @@ class Pipeline:
         with ThreadPoolExecutor(1) as beside:
             planned = beside.submit(self.plan_denoising, lay)
             light = self.direct_light(lay)
+            if not planned.done():
+                self.report(Progress("prepare", 0.0, "Finding the denoiser's regions and fragments"))
             plan = planned.result()
         est = self.build_estimators(lay)
         traced = self.trace(lay, light, est)
