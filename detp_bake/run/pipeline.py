@@ -147,8 +147,8 @@ class Pipeline:
 
     def run(self, reach_of=None) -> dict:
         lay = self.lay_out(reach_of)
-        # The denoiser's plan (mostly one core's work) beside the direct light (every core's): neither
-        # reads what the other makes.
+        # The denoiser's plan beside the direct light: neither reads what the other makes, and each
+        # leaves a core idle at times (the plan's serial parts, the shadow rays' last chunks).
         with ThreadPoolExecutor(1) as beside:
             planned = beside.submit(self.plan_denoising, lay)
             light = self.direct_light(lay)
