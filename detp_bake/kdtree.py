@@ -135,6 +135,17 @@ def _partition(idx, data, d, first, last, pivot):
 
 # --- the tree --------------------------------------------------------------------------------------
 
+@numba.njit(cache=True, inline="always")
+def _extreme(idx, data, d, s, e, largest):
+    """The position in idx[s:e] of the first point with the smallest coordinate d (the largest
+    with `largest`)."""
+    k = s
+    for i in range(s + 1, e):
+        if (data[idx[k], d] < data[idx[i], d]) if largest else (data[idx[i], d] < data[idx[k], d]):
+            k = i
+    return k
+
+
 @numba.njit(cache=True)
 def _split(data, idx, s, e, lo, hi, median):
     """(dimension, split value, first index of the upper part) of one node, or (-1, 0, s): a leaf;
@@ -153,19 +164,11 @@ def _split(data, idx, s, e, lo, hi, median):
     else:
         split = (hi[d] + lo[d]) / 2
         p = _partition(idx, data, d, s, e, split)
-    if p == s:
-        k = s
-        for i in range(s + 1, e):
-            if data[idx[i], d] < data[idx[k], d]:
-                k = i
-        split = np.nextafter(data[idx[k], d], np.inf)
+    if p == s:  # every point on the upper side: split just above the smallest
+        split = np.nextafter(data[idx[_extreme(idx, data, d, s, e, False)], d], np.inf)
         p = _partition(idx, data, d, s, e, split)
-    elif p == e:
-        k = s
-        for i in range(s + 1, e):
-            if data[idx[k], d] < data[idx[i], d]:
-                k = i
-        split = data[idx[k], d]
+    elif p == e:  # every point on the lower side: split at the largest
+        split = data[idx[_extreme(idx, data, d, s, e, True)], d]
         p = _partition(idx, data, d, s, e, split)
     if p == s or p == e:
         return -2, 0.0, s
