@@ -331,22 +331,6 @@ def _one(data, tree, root, lo0, hi0, x, k, bound, node_of, min_of, side_of, qp, 
     return True
 
 
-@numba.njit(cache=True, parallel=True)
-def _query(data, tree, lo0, hi0, xs, k, bound, out_d, out_i, blocks):
-    m = xs.shape[0]
-    for b in numba.prange(blocks):
-        cap = 256  # nodes met by one query; doubled when a query meets more
-        npri, nval = np.empty(k), np.empty(k, np.int64)
-        q = b * m // blocks
-        while q < (b + 1) * m // blocks:
-            node_of, min_of, side_of = np.empty(cap, np.int64), np.empty(cap), np.empty((cap, 3))
-            qp, qv = np.empty(cap), np.empty(cap, np.int64)
-            while q < (b + 1) * m // blocks and _one(data, tree, 0, lo0, hi0, xs[q], k, bound, node_of, min_of,
-                                                     side_of, qp, qv, npri, nval, out_d[q], out_i[q]):
-                q += 1
-            cap *= 2
-
-
 class KDTree:
     """The tree over (N, 3) points, kept as float64 copies. `balanced`: median splits (cKDTree's
     default), else sliding midpoints; `compact`: each node's bounds shrunk to its points (default)."""
@@ -371,7 +355,9 @@ class KDTree:
         idx = np.full((len(x), k), n, np.int64)
         if n and len(x):
             blocks = min(len(x), 4 * numba.get_num_threads())
-            _query(self.points, self._tree, self.lo, self.hi, x, k, float(distance_upper_bound), dist, idx, blocks)
+            forest = (*self._tree, np.array([0, len(self._tree[1])], np.int64), self.lo[None], self.hi[None])
+            _forest_query(self.points, forest, x, np.zeros(len(x), np.int64), np.array([k], np.int64),
+                          np.array([float(distance_upper_bound)]), dist, idx, blocks)
         return dist, idx
 
 
@@ -410,8 +396,9 @@ def _forest(data, start, count):
 
 
 @numba.njit(cache=True, parallel=True)
-def _forest_query(data, forest, start, count, xs, group, k, bound, out_d, out_i, blocks):
-    """_query for queries each in its own group's tree (_forest), with the group's k and bound."""
+def _forest_query(data, forest, xs, group, k, bound, out_d, out_i, blocks):
+    """The k nearest points (`_one`) of each query in its own group's tree (`_forest`; KDTree.query:
+    one tree), with the group's k and bound, the queries in `blocks` runs over every core."""
     idx, node, split, first, lo, hi = forest
     m = xs.shape[0]
     for b in numba.prange(blocks):
@@ -452,5 +439,5 @@ def query_groups(points, start, count, x, group, k, bound):
         forest = _forest(points, start, np.where(asked, count, 0))
         bound = np.ascontiguousarray(np.broadcast_to(bound, count.shape), np.float64)
         blocks = min(len(x), 4 * numba.get_num_threads())
-        _forest_query(points, forest, start, count, x, group, k, bound, dist, idx, blocks)
+        _forest_query(points, forest, x, group, k, bound, dist, idx, blocks)
     return dist, idx
