@@ -37,7 +37,7 @@ from ..sampling import jit
 from ..bvh import TriangleTree
 from ..kdtree import query_groups
 from .texels import TexelSet, geometric_normals, lightmap_triangles
-from .validity import blocked_between
+from .validity import blocked_between, whole_batches
 
 FRAGMENT = 8.0  # texels: charts narrower than this (charts.py's width) are not denoised as an image
 NEIGHBOURS = 24  # texels in each fragment texel's mean, itself included
@@ -104,13 +104,6 @@ def _passes(flat, neighbour, weight, row, passes, out):
     for f in range(f_count):
         for c in range(c_count):
             out[f, c] = np.float32(last[f, c])
-
-
-def fragment_texels(texels: TexelSet, lm, scene, narrower: float = FRAGMENT) -> np.ndarray:
-    """Indices (within lightmap `lm`'s texels) of those whose triangle's chart is narrower than
-    `narrower` texels."""
-    width = chart_widths_of(texels, scene, [lm])
-    return np.flatnonzero(width[texels.triangle[lm.texels]] < narrower)
 
 
 def chart_widths_of(texels: TexelSet, scene, lightmaps) -> np.ndarray:
@@ -190,8 +183,7 @@ def find_all(texels: TexelSet, scene, caster, threads: int = 1, starved=(), ligh
     ends = np.searchsorted(group, np.arange(len(start) + 1))  # each lightmap's rows of `frag`
     near, weight = np.zeros((len(frag), NEIGHBOURS), np.int32), np.zeros((len(frag), NEIGHBOURS), np.float32)
     # Whole lightmaps at a time, about BATCH fragment texels: their (F, K) float64 arrays stay small.
-    bounds = np.unique(np.append(ends[np.searchsorted(ends, np.arange(0, len(frag), BATCH), side="right") - 1],
-                                 len(frag)))
+    bounds = np.unique(ends[whole_batches(ends, BATCH)])  # lightmaps without fragments make no empty batch
     triangles = TriangleTree(scene.positions)
     for a, b in zip(bounds[:-1], bounds[1:]):
         n, w = _neighbours(texels, scene, caster, threads, frag[a:b], group[a:b], start, count, size, triangles)

@@ -425,12 +425,18 @@ def all_regions(texels: TexelSet, cuts: Cuts, caster, scene, threads: int = 1) -
     """{name: `regions` of each lightmap with a cut texel}, found whole lightmaps at a time, about
     BLOCK texels (their pairs take some 150 bytes a texel)."""
     which = _with_cuts(texels, cuts)
-    ends = np.cumsum([0] + [texels.lightmaps[i].count for i in which])
-    bounds = np.unique(np.append(np.searchsorted(ends, np.arange(0, ends[-1], BLOCK), side="right") - 1, len(which)))
+    bounds = whole_batches(np.cumsum([0] + [texels.lightmaps[i].count for i in which]), BLOCK)
     out = {}
     for a, b in zip(bounds[:-1], bounds[1:]):
         out.update(_regions_of(texels, which[a:b], cuts, caster, scene, threads))
     return out
+
+
+def whole_batches(ends: np.ndarray, per: int) -> np.ndarray:
+    """Bounds (indices into the parts, ascending, from 0 to the last) of runs of whole parts of
+    about `per` items each, the parts' items ending at `ends` (cumulative, from 0): a part larger
+    than `per` is a run of its own."""
+    return np.unique(np.append(np.searchsorted(ends, np.arange(0, ends[-1], per), side="right") - 1, len(ends) - 1))
 
 
 def _with_cuts(texels: TexelSet, cuts: Cuts) -> np.ndarray:
