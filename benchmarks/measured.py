@@ -63,8 +63,7 @@ def _levels_table(d: dict) -> str:
                     + f" | {r['wall']:.1f} | {r['peak_mb']:,.0f} | {r['oidn_alone']:.1f} | "
                     f"{r.get('oidn_whole', 0):.1f} |")
     m = d["recorded"]
-    return "\n".join(rows) + (f"\n\n*{d['faces']:,} faces; {m['cores']} cores; commit {m['commit']}, {m['date']}; the "
-                               "fragments are found on a thread of their own while the direct light is traced.*\n")
+    return "\n".join(rows) + f"\n\n*{d['faces']:,} faces; {m['cores']} cores; commit {m['commit']}, {m['date']}.*\n"
 
 
 def _levels_sentence(d: dict) -> str:
@@ -73,7 +72,7 @@ def _levels_sentence(d: dict) -> str:
         s = r["seconds"]
         peak = f"{r['peak_mb'] / 1000:.1f} GB" if r["peak_mb"] >= 1000 else f"{r['peak_mb']:.0f} MB"
         parts.append(f"at {r['size']}² rasterise {s.get('rasterise', 0):.1f}, validity {s.get('validity', 0):.1f}, "
-                     f"fragments {s.get('fragments', 0):.1f} beside direct {s.get('direct', 0):.1f}, trace "
+                     f"fragments {s.get('fragments', 0):.1f}, direct {s.get('direct', 0):.1f}, trace "
                      f"{s.get('trace', 0):.1f}, estimate {s.get('estimate', 0):.1f}, denoise "
                      f"{s.get('denoise', 0):.1f} (total {r['wall']:.1f}, peak {peak}; OIDN alone on one image "
                      f"of that size {r['oidn_alone']:.1f} in tiles, {r.get('oidn_whole', 0):.1f} whole)")

@@ -22,7 +22,6 @@ from __future__ import annotations
 import contextlib
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Optional
@@ -147,14 +146,8 @@ class Pipeline:
 
     def run(self, reach_of=None) -> dict:
         lay = self.lay_out(reach_of)
-        # The denoiser's plan beside the direct light: neither reads what the other makes, and each
-        # leaves a core idle at times (the plan's serial parts, the shadow rays' last chunks).
-        with ThreadPoolExecutor(1) as beside:
-            planned = beside.submit(self.plan_denoising, lay)
-            light = self.direct_light(lay)
-            if not planned.done():
-                self.report(Progress("prepare", 0.0, "Finding the denoiser's regions and fragments"))
-            plan = planned.result()
+        plan = self.plan_denoising(lay)
+        light = self.direct_light(lay)
         est = self.build_estimators(lay)
         traced = self.trace(lay, light, est)
         results = self.results(lay, plan, light, est, traced)
@@ -203,6 +196,7 @@ class Pipeline:
         neighbours (finishing.plan); nothing without denoising."""
         if not (self.settings.denoise and denoise_mod.available()):
             return Denoising()
+        self.report(Progress("prepare", 0.0, "Finding the denoiser's regions and fragments"))
         plan = plan_denoising(lay.texels, self.scene, lay.caster, self.threads, self.settings.photons)
         lay.seconds["validity"] += plan.seconds["regions"]
         lay.seconds["fragments"] = plan.seconds["fragments"]
