@@ -135,7 +135,8 @@ OPTIONS = (
     Option("estimator", str, "texel_histogram", "Estimator", "Density estimator that turns photons into irradiance",
            choices=ESTIMATORS),
     Option("photons", int, 0, "Photons", "Photons traced from the lights: more means less noise; 0: automatic, "
-           f"{PHOTONS_PER_TEXEL} per lightmap texel to bake ({AUTO_PHOTONS[0]:,} to {AUTO_PHOTONS[1]:,}); with a noise "
+           f"{PHOTONS_PER_TEXEL} per lightmap texel to bake, times the surfaces' mean reflectance with shadow rays "
+           f"({AUTO_PHOTONS[0]:,} to {AUTO_PHOTONS[1]:,}); with a noise "
            f"target or a time limit the most to trace ({MAX_PHOTONS:,} when automatic)",
            minimum=1, maximum=MAX_PHOTONS, soft_maximum=50_000_000, auto=0),
     Option("direct", str, "sampled", "Direct Light", "How direct light is found",

@@ -10,6 +10,7 @@ import pytest
 
 from detp_bake.run import memory
 from detp_bake.run.bake import BakeSettings, compute
+from detp_bake.transport.scattering import flights_per_photon
 from detp_bake.errors import BakeError
 from detp_bake.scene import PointLight, SunLight
 from conftest import ROOT
@@ -36,7 +37,7 @@ def test_a_thousand_bounces_in_a_white_room_bound_the_batch_by_segments():
     few thousand photons, not 100,000; the estimate stays near what the bake really used."""
     sc = make_scene([("Sphere", uv_sphere(1.0, 12, 24, inward=True), 1.0, True)],
                     [PointLight("Lamp", np.zeros(3), np.full(3, 10.0))], resolution=16)
-    assert memory.segments_per_photon(1.0, 1000) == 1001
+    assert flights_per_photon(1.0, 1000) == 1001
     r = compute(sc, BakeSettings(photons=5000, bounces=1000, denoise=False))
     assert r.memory["batch_photons"] == memory.MAX_BATCH_SEGMENTS // 1001
     assert r.stats.segments > 4_000_000  # it really did bounce that much

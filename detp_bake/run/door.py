@@ -14,6 +14,7 @@ from typing import Optional
 
 from ..lightmap import images, texels as texels_mod
 from ..options import AUTO_PHOTONS, PHOTONS_PER_TEXEL
+from ..transport import scattering
 from . import directional
 from .settings import BakeSettings
 
@@ -45,7 +46,7 @@ def admitted(settings, names=None, out_dir=None, frame_state=None) -> Admission:
 
 
 def auto_photons(scene, settings: BakeSettings) -> int:
-    """The photons a bake traces: the setting, or when it is 0, PHOTONS_PER_TEXEL for every texel
+    """The photons a bake traces: the setting, or when it is 0, `photons_per_texel` for every texel
     of the lightmaps to bake (objects without a resolution of their own take the setting's; an atlas
     counts once), within AUTO_PHOTONS: more texels need more photons for the same noise per texel."""
     if settings.photons:
@@ -53,7 +54,23 @@ def auto_photons(scene, settings: BakeSettings) -> int:
     firsts = (scene.objects[members[0]] for _, members in texels_mod.images(scene))
     texels = sum((o.resolution if o.resolution > 0 else settings.resolution) ** 2 for o in firsts)
     low, high = AUTO_PHOTONS
-    return int(min(max(PHOTONS_PER_TEXEL * texels, low), high))
+    return int(min(max(photons_per_texel(scene, settings) * texels, low), high))
+
+
+def photons_per_texel(scene, settings: BakeSettings) -> float:
+    """PHOTONS_PER_TEXEL, times `roulette_share`: the noise PHOTONS_PER_TEXEL gave with the roulette
+    at the first landing."""
+    return PHOTONS_PER_TEXEL * roulette_share(scene, settings)
+
+
+def roulette_share(scene, settings: BakeSettings) -> float:
+    """How many photons with the roulette at their first landing one photon of this bake's is worth,
+    inverted: the surfaces' survival q where the photons bring the indirect light alone (shadow rays
+    the direct), as their first reflection is certain (scattering.py) and q times the photons then
+    give the same noise; else 1. At least 1/64 (a black scene has no indirect light to count)."""
+    if settings.direct != "sampled":
+        return 1.0
+    return max(scattering.survival(scene.albedo, scene.positions), 1.0 / 64.0)
 
 
 def with_photons(admission: Admission, scene) -> Admission:

@@ -38,8 +38,9 @@ class Denoising:
 
 def plan(texels, scene, caster, threads: int, photons: int = 0) -> Denoising:
     """The regions and fragments of every lightmap (Denoising), with the seconds each took; with
-    `photons` (the bake's), a lightmap that can expect few a texel has its wider charts among its
-    fragments too (fragments.starved_lightmaps)."""
+    `photons` (the bake's, in photons with the roulette at the first landing: door.roulette_share),
+    a lightmap that can expect few a texel has its wider charts among its fragments too
+    (fragments.starved_lightmaps)."""
     out = Denoising()
     t0 = time.perf_counter()
     found = {} if texels.cuts is None else validity.all_regions(texels, texels.cuts, caster, scene, threads)

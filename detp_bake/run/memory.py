@@ -73,15 +73,6 @@ MAX_BATCH_SEGMENTS = 4_000_000  # segments one batch may hold (160 MB of records
 MIN_BATCH = 1000
 
 
-def segments_per_photon(survival: float, bounces: int, first: int = 0) -> float:
-    """Expected segments of one photon: its flights from bounce `first` to `bounces`, each
-    surviving Russian roulette with probability `survival` (the mean max(albedo))."""
-    q = min(max(survival, 0.0), 1.0)
-    if q >= 1.0:
-        return float(bounces + 1 - first)
-    return sum(q ** b for b in range(first, min(bounces, 100_000) + 1))
-
-
 def batch_photons(asked: int, per_photon: float) -> int:
     """Photons per batch: as asked, but no more than MAX_BATCH_SEGMENTS segments' worth."""
     return int(max(MIN_BATCH, min(asked, MAX_BATCH_SEGMENTS / max(per_photon, 1e-9))))

@@ -35,10 +35,9 @@ from ..estimators.rise import own_surface_rise, piece_extent, welded_pieces
 from ..lightmap import denoise as denoise_mod, fragments as fragments_mod, sites as sites_mod, \
     texels as texels_mod, validity
 from ..lightmap.noise import MIN_GROUPS, BatchNoise
-from ..options import PHOTONS_PER_TEXEL
 from ..probes import baking as probes_mod, placement
 from ..rays import RayCaster
-from ..transport import direct as direct_mod, frame_direct
+from ..transport import direct as direct_mod, frame_direct, scattering
 from ..transport.photons import PhotonTracer
 from . import directional as directional_mod, door, memory
 from .batches import Totals, TraceJob, blocks, trace_batches, worker_bytes
@@ -130,15 +129,15 @@ class Pipeline:
         self.sampled = settings.direct == "sampled"
         first = 1 if self.sampled else 0  # the first flight is direct light, left out when sampled
         scene = self.scene
-        survival = float(np.mean(np.clip(scene.albedo, 0.0, 1.0).max(axis=1))) if scene.triangle_count else 0.0
-        per_photon = memory.segments_per_photon(survival, self.bounces)
-        self.per_photon_kept = memory.segments_per_photon(survival, self.bounces, first)
+        survival = scattering.survival(scene.albedo, scene.positions)
+        per_photon = scattering.flights_per_photon(survival, self.bounces)
+        self.per_photon_kept = scattering.flights_per_photon(survival, self.bounces, first)
         self.batch_size = memory.batch_photons(settings.batch_size, per_photon)
         self.threads = settings.threads or os.cpu_count() or 1
         if admitted.automatic:
             expect = settings.photons * per_photon / (RAYS_PER_SECOND * self.threads)
             self.report(Progress("prepare", 0.0, f"Photons: {si(settings.photons)}, chosen for the lightmaps' "
-                                                 f"texels ({PHOTONS_PER_TEXEL} a texel; set them with --photons); "
+                                                 f"texels ({door.photons_per_texel(scene, settings):.3g} a texel; set them with --photons); "
                                                  f"tracing them should take about {expect:.2g} s on {self.threads} "
                                                  "threads"))
         self.need = memory.check(scene, settings, self.names, self.batch_size, per_photon, self.per_photon_kept,
@@ -197,7 +196,9 @@ class Pipeline:
         if not (self.settings.denoise and denoise_mod.available()):
             return Denoising()
         self.report(Progress("prepare", 0.0, "Finding the denoiser's regions and fragments"))
-        plan = plan_denoising(lay.texels, self.scene, lay.caster, self.threads, self.settings.photons)
+        # The photons' worth with the roulette at the first landing: what STARVED_PHOTONS counts.
+        worth = self.settings.photons / door.roulette_share(self.scene, self.settings)
+        plan = plan_denoising(lay.texels, self.scene, lay.caster, self.threads, int(worth))
         lay.seconds["validity"] += plan.seconds["regions"]
         lay.seconds["fragments"] = plan.seconds["fragments"]
         return plan

@@ -3,8 +3,8 @@ records density estimators use — path segments (DETP family) and surface hits 
 
 A bounce is one diffuse reflection. `bounces` caps the reflections a photon may have made before it
 lands (0 = direct light only), exactly as Cycles' Light Paths › Diffuse bounces does for its bake.
-Reflection uses Russian roulette with survival probability max(albedo), so the expected flux is
-exact and a path ends on its own in closed scenes. Each photon draws its random numbers from its
+A photon's first landing always reflects it; later ones by Russian roulette with survival probability
+max(albedo) (scattering.py), so the expected flux is exact and a path ends on its own in closed scenes. Each photon draws its random numbers from its
 own stream, started from (seed, photon id) (`sampling.py`), and records are laid out in an order
 fixed by the batch size alone, so a bake is deterministic for a seed whatever the thread count.
 """
@@ -25,7 +25,7 @@ from ..rays import RayCaster
 from .lights import build_emitters
 from .schedule import BatchSchedule
 from .textures import surfaces
-from .scattering import MAX_PASSES, RAY_FAR, bounce, material_table, pass_through
+from .scattering import MAX_PASSES, RAY_FAR, bounce, flights_per_photon, material_table, pass_through
 from ..scene import Scene
 
 
@@ -310,7 +310,7 @@ class PhotonTracer:
         # survival probability; later batches go by what earlier ones made. (A batch that makes
         # more grows its arrays at the end.)
         q = float(np.mean(self.materials[self.material_of, 3])) if len(self.material_of) else 0.0
-        self._per_photon = sum(min(q, 0.95) ** b for b in range(min(self.bounces, 200) + 1))
+        self._per_photon = flights_per_photon(min(q, 0.95), min(self.bounces, 200))
         self._per_photon_hits = self._per_photon
 
     @property

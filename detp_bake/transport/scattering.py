@@ -4,8 +4,15 @@ reflected diffusely with the albedo Cycles would use there.
 Two compiled kernels over a stream's ray log (photons.py): `pass_through` lets a ray through a
 surface with the probability of its transparency (Cycles treats alpha as stochastic transparency),
 continuing it in a new ray from just past the surface; `bounce` records where the others land and
-reflects them by Russian roulette with survival probability max(albedo), so the expected flux is
-exact. The albedo is the triangle's constant, or that constant times its texture at the hit.
+reflects them. The albedo is the triangle's constant, or that constant times its texture at the hit.
+
+From its first landing every photon is reflected, its flux times the albedo; from the later ones by
+Russian roulette with survival probability q = max(albedo), its flux times albedo / q. Both keep the
+expected flux exact. The first landing is where the roulette costs most: its flights carry the
+whole of the first bounce's light, and a photon lost there took a ray from the light for nothing.
+Its landings' flux squared, summed, is q times what the roulette gives, so the same noise takes q
+times the photons (`survival` sets the automatic count by it); on the arena-like level
+(benchmarks/levels.py) that was 37 % fewer rays (docs/benchmarks.md, "The first bounce").
 """
 from __future__ import annotations
 
@@ -16,6 +23,29 @@ from .textures import hit_uv, lookup, opacity_at
 
 RAY_FAR = 1e37  # a ray's initial tfar: no limit
 MAX_PASSES = 64  # cut-out surfaces one flight may pass before the next one stops it
+
+
+def survival(albedo: np.ndarray, positions: np.ndarray) -> float:
+    """The chance a photon goes on from a landing after its first: max(albedo) clipped to [0, 1],
+    averaged over the surface by area (textures left out)."""
+    a = np.clip(np.asarray(albedo, np.float64).reshape(-1, 3), 0.0, 1.0).max(axis=1) if len(albedo) else np.zeros(0)
+    p = np.asarray(positions, np.float64).reshape(-1, 3, 3)
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    total = float(area.sum())
+    return float(area @ a / total) if total > 0.0 else float(a.mean()) if len(a) else 0.0
+
+
+def flights_per_photon(survival: float, bounces: int, first: int = 0) -> float:
+    """Expected flights of one photon from flight `first` to flight `bounces` (flight 0 leaves the
+    light; flight b ends its b-th reflection): the first reflection is certain where anything
+    reflects, each later one survives the roulette with probability `survival`."""
+    q = min(max(survival, 0.0), 1.0)
+    last = min(int(bounces), 100_000)
+    if q <= 0.0:
+        return 1.0 if first == 0 else 0.0
+    if q >= 1.0:
+        return float(max(last + 1 - first, 0))
+    return float(sum(1.0 if b == 0 else q ** (b - 1) for b in range(first, last + 1)))
 
 
 def material_table(albedo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -70,8 +100,8 @@ def bounce(s, e, prim, ng, bu, bv, through, o, d, f, length, rng, hit_pos, hit_d
            nh, material_of, materials, albedo_tex, tex_uvs, pixels, info, level, max_bounces, centre,
            escape_radius, eps, sums):
     """Rays s … e−1 of one stream's log after Embree (and `pass_through`): segment lengths (Embree
-    wrote the hit distances into `length`), hit records from `nh` on, and the Russian-roulette
-    diffuse reflection, whose survivors are appended to the log from e on, with their random
+    wrote the hit distances into `length`), hit records from `nh` on, and the diffuse reflection
+    (certain from a first landing, `level` 0; Russian roulette after: module docstring), whose survivors are appended to the log from e on, with their random
     states. `materials` rows are (albedo RGB, survival probability q, albedo / q); a triangle with
     an albedo texture scales its row's albedo by the texture at the hit. `sums` rows gain the
     absorbed, escaped and truncated flux. Returns (end of the log, hit count, segments of
@@ -136,7 +166,11 @@ def bounce(s, e, prim, ng, bu, bv, through, o, d, f, length, rng, hit_pos, hit_d
             tr2 += f2 * a2
             continue
         state, u0, u1 = uniform2(rng[i])
-        if u0 >= q:  # absorbed by Russian roulette (always when q = 0)
+        if level == 0:  # from its first landing every photon is reflected, its flux times the albedo
+            if q <= 0.0:
+                continue
+            c0, c1, c2 = a0, a1, a2
+        elif u0 >= q:  # absorbed by Russian roulette (always when q = 0)
             continue
         state, u2, _ = uniform2(state)
         # Cosine-weighted direction about the face normal on the side the photon arrived.
