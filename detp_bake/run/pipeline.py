@@ -295,6 +295,7 @@ class Pipeline:
                 self.check_cancel()
                 self._show(lay, light, est, traced, totals, share)
                 traced.stopped_by = self._stop(lay, est, traced, part, totals)
+                del part  # its sums are in the totals: an estimator may clear and fill them again
                 if traced.stopped_by != "photons":
                     break
         tracer.stats, tracer.batches_done = totals.stats, totals.batches
