@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from .charts import chart_widths, widths_of_objects
@@ -49,7 +50,6 @@ STARVED_PHOTONS = 8.0  # photons a texel (by area) under which a lightmap's char
 STARVED_WIDTH = 32.0  # texels: a starved lightmap's charts narrower than this skip OIDN (wider ones it still
 # cleans best: a 64-texel plane at 10 photons a texel, 7.9 % per texel by OIDN, 10.5 % smoothed)
 LIFT = 0.25  # texel sizes: rays between neighbours pass this far above the surface (over a convex curve's chord)
-CHUNK = 1 << 16  # fragment texels whose neighbours' normals are held at once (40 MB)
 BATCH = 1 << 15  # fragment texels (of whole lightmaps) found at once: 6 MB an (F, K) float64 array
 
 
@@ -208,10 +208,8 @@ def _neighbours(texels, scene, caster, threads, frag, group, start, count, size,
     own = size[group]
     dist, near = query_groups(pos, start, count, pos[frag], group, np.minimum(NEIGHBOURS, count),
                               3 * SIGMA * size)
-    found = near < len(pos)
-    near = np.where(found, near, frag[:, None])
-    for a in range(0, len(frag), CHUNK):  # (F, K, 3) normals a chunk at a time: 2 GB for a million texels
-        found[a:a + CHUNK] &= np.einsum("fc,fkc->fk", nrm[frag[a:a + CHUNK]], nrm[near[a:a + CHUNK]]) >= COS
+    found = np.empty(near.shape, np.bool_)
+    _facing(nrm, frag, near, found)
     # A ray from a texel to a neighbour can be blocked only where some triangle crosses the disc of
     # its reach lifted off the surface: most texels of an open floor need no rays.
     g = geometric_normals(scene, texels.triangle[frag], nrm[frag])
@@ -222,9 +220,43 @@ def _neighbours(texels, scene, caster, threads, frag, group, start, count, size,
     if f.size:
         blocked, _ = blocked_between(texels, frag[f], near[f, j], LIFT * own[f], caster, scene, threads)
         found[f, j] = ~blocked
-    area = texels.area
-    weight = np.where(found, area[near] * np.exp(-0.5 * (np.where(found, dist, 0.0) / (SIGMA * own)[:, None]) ** 2),
-                      0.0)
-    alone = ~(weight.sum(axis=1) > 0)  # a texel of no area with every neighbour hidden keeps its own value
-    near[alone, 0], weight[alone, 0] = frag[alone], 1.0
-    return near, weight.astype(np.float32)
+    weight = np.empty(near.shape, np.float32)
+    _weights(found, near, dist, texels.area, SIGMA * own, frag, weight)
+    return near, weight
+
+
+@numba.njit(cache=True, parallel=True)
+def _facing(nrm, frag, near, found):
+    """Per fragment texel and neighbour found (`near` < the texel count; the others become the
+    texel itself), whether their shading normals lie within COS: `found`, in place of two (F, K)
+    gathers (a million fragment texels' (F, K, 3) normals were 2 GB)."""
+    n = nrm.shape[0]
+    for f in numba.prange(near.shape[0]):
+        a = frag[f]
+        for k in range(near.shape[1]):
+            b = near[f, k]
+            if b >= n:
+                near[f, k] = a
+                found[f, k] = False
+                continue
+            d = nrm[a, 0] * nrm[b, 0] + nrm[a, 1] * nrm[b, 1] + nrm[a, 2] * nrm[b, 2]
+            found[f, k] = d >= COS
+
+
+@numba.njit(cache=True, parallel=True)
+def _weights(found, near, dist, area, sigma, frag, weight):
+    """Each neighbour's weight: its texel's area times a Gaussian of its distance (`sigma` metres
+    per fragment texel), 0 where not found; a texel whose weights sum to nothing (no area, every
+    neighbour hidden) keeps its own value (weight 1 on itself)."""
+    for f in numba.prange(near.shape[0]):
+        total = 0.0
+        for k in range(near.shape[1]):
+            w = 0.0
+            if found[f, k]:
+                x = dist[f, k] / sigma[f]
+                w = np.float64(area[near[f, k]]) * np.exp(-0.5 * x * x)
+            total += w
+            weight[f, k] = np.float32(w)
+        if not total > 0.0:
+            near[f, 0] = frag[f]
+            weight[f, 0] = np.float32(1.0)
