@@ -35,3 +35,18 @@ def test_the_expected_flights_count_the_first_reflection_as_certain():
     assert flights_per_photon(0.5, 3, first=1) == 1.75
     assert flights_per_photon(0.0, 3) == 1.0 and flights_per_photon(0.0, 3, first=1) == 0.0
     assert flights_per_photon(1.0, 9) == 10.0
+
+
+def test_segments_are_counted_but_not_copied_when_no_estimator_reads_them():
+    """The texel histogram and the photon map read the hits alone: the tracer then hands out
+    batches without segments (PhotonTracer(segments=False)), the same hits and the same counts."""
+    sc = make_scene([("Floor", grid(20.0, 20.0, 2), 0.5, True)],
+                    [PointLight("Lamp", np.array([0.0, 0.0, 1.0]), np.full(3, 100.0))], resolution=8)
+    runs = []
+    for segments in (True, False):
+        tracer = PhotonTracer(sc, 30_000, bounces=3, seed=4, batch_size=10_000, segments=segments)
+        runs.append((tracer, [(b.segment_count, b.hit_position.copy(), b.hit_flux.copy()) for b in tracer.batches()]))
+    (with_seg, a), (without, b) = runs
+    assert with_seg.stats.segments == without.stats.segments > 30_000
+    assert all(sa > 0 and sb == 0 for (sa, _, _), (sb, _, _) in zip(a, b))
+    assert all(np.array_equal(pa, pb) and np.array_equal(fa, fb) for (_, pa, fa), (_, pb, fb) in zip(a, b))

@@ -33,6 +33,12 @@ def get(name: str) -> type[Estimator]:
     return REGISTRY[name]
 
 
+def read_segments(chosen) -> bool:
+    """Whether any estimator of `chosen` reads the photons' path segments: the tracer records them
+    only then (for the texel histogram alone, 40 bytes a segment copied for nothing)."""
+    return any(get(name).segments for name in chosen)
+
+
 def compare_order(chosen) -> list[str]:
     """The estimators of `chosen` as Compare lays them out: the baseline first, then as listed."""
     chosen = set(chosen)

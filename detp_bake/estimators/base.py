@@ -79,6 +79,7 @@ class Estimator:
     every_texel = False  # estimates every texel at no cost per texel: the bake gives it no sites (sites.py)
     for_denoiser = False  # its noise is white, texel by texel: made to be denoised (the bake warns without)
     stores_hits = False  # keeps every surface hit until `finish` (memory grows with the photons)
+    segments = True  # reads the batches' path segments (the tracer copies them only when one does)
     # Reads the texels' positions or normals while tracing (its discs, its preview's gathers); one
     # that does not lets the bake set them aside meanwhile (texels.geometry_set_aside).
     texel_geometry_while_tracing = True

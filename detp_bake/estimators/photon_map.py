@@ -55,6 +55,7 @@ class PhotonMap(Estimator):
     name = "photon_map"
     bytes_per_texel = 30  # its (N, 3) result (the hits are counted apart): benchmarks/memory.py
     stores_hits = True
+    segments = False  # the hits alone
     slow_preview = True
     baseline = True
     directional = True

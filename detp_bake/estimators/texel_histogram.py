@@ -141,31 +141,31 @@ def _add_l1(texel, weight, flux, direction, acc):
 
 
 class _Spares:
-    """The block sums handed over by `take`, to be cleared and filled again once nobody else holds
-    them (the bake has added them into its totals and let them go): new zeros are mapped fresh, and
-    each page the next block touches faults once. At 557k texels that was 3,300 faults a block and
-    about 0.4 s of a 1024² bake's main thread, where clearing an array takes a millisecond. An array
-    still held elsewhere (the bake's totals adopt the first block's) is never cleared."""
+    """The block sums `take` handed over, filled again once nobody else holds them (the bake has
+    added them into its totals and let them go): a block's first landing then goes into one of them,
+    cleared, instead of into new zeros, which are mapped fresh, so that every page the block touched
+    faulted once. At 557k texels that was 3,300 faults a block and about 0.4 s of a 1024² bake's
+    main thread, where clearing an array takes a millisecond. Nothing more is held at once than with
+    new zeros: the spare is taken up when the next block begins, after the bake let the last one go.
+    An array held elsewhere (the bake's totals adopt the first block's) is never cleared."""
 
-    KEEP = 2  # the bake's loop holds the last block's sums while the next block is traced
+    KEEP = 2
 
     def __init__(self):
         self.handed: list = []
 
-    def zeros(self, given: np.ndarray) -> np.ndarray:
-        """Zeros shaped as `given`, which is handed over now: a free spare cleared, or new."""
-        free = None
+    def hand(self, sums: np.ndarray) -> None:
+        self.handed = (self.handed + [sums])[-self.KEEP:]
+
+    def reuse(self, untouched: np.ndarray) -> np.ndarray:
+        """A spare shaped as `untouched` (new zeros no landing has touched), cleared; or `untouched`."""
         for i in range(len(self.handed)):
             a = self.handed[i]
-            if a.shape == given.shape and sys.getrefcount(a) <= 3:  # this list, `a`, the call's own
-                free = self.handed.pop(i)
-                break
-        a = None
-        self.handed = (self.handed + [given])[-self.KEEP:]
-        if free is None:
-            return np.zeros(given.shape)
-        free.fill(0.0)
-        return free
+            if a.shape == untouched.shape and sys.getrefcount(a) <= 3:  # this list, `a`, the call's own
+                del self.handed[i]
+                a.fill(0.0)
+                return a
+        return untouched
 
     def clear(self) -> None:
         self.handed = []
@@ -186,6 +186,7 @@ class TexelHistogram(Estimator):
     # measured, benchmarks/memory.py
     bytes_per_texel = 60
     streaming = True
+    segments = False  # the hits alone
     every_texel = True  # its estimate costs nothing per texel: no sites between which to blend
     texel_geometry_while_tracing = False  # landings find their texel from the scene's triangles
     for_denoiser = True
@@ -221,6 +222,7 @@ class TexelHistogram(Estimator):
         self.acc = np.zeros((len(texels), 3))
         self.acc_l1 = np.zeros((len(texels), 9)) if self.context.directional else None
         self._spares, self._spares_l1 = _Spares(), _Spares()
+        self._untouched = False  # self.acc (and acc_l1) are new zeros from `take`, untouched
         self.landings = self.counted = 0
         self.seconds = 0.0
 
@@ -228,6 +230,11 @@ class TexelHistogram(Estimator):
         t0 = time.perf_counter()
         n = batch.hit_count
         texel, weight = np.empty(n, np.int32), np.empty(n)
+        if self._untouched:
+            self.acc = self._spares.reuse(self.acc)
+            if self.acc_l1 is not None:
+                self.acc_l1 = self._spares_l1.reuse(self.acc_l1)
+            self._untouched = False
         _landing_texels(batch.hit_position, batch.hit_dir, batch.hit_triangle, *self._tables, *self._surfaces, texel,
                         weight)
         self.counted += _add(texel, weight, batch.hit_flux, self.acc)
@@ -238,12 +245,16 @@ class TexelHistogram(Estimator):
 
     def take(self):
         """Hands its sums over, not a copy (the bake adopts or adds them), and starts again from
-        zeros: an earlier block's sums the bake let go (_Spares), or new ones."""
+        zeros that take no memory until a photon lands, and then become an earlier block's sums the
+        bake let go, cleared, where there is one (_Spares)."""
         sums = {"irradiance": self.acc, "landings": self.landings, "counted": self.counted,
                 "seconds_query": self.seconds}
-        self.acc = self._spares.zeros(self.acc)
+        self._spares.hand(self.acc)
+        self.acc = np.zeros(self.acc.shape)
         if self.acc_l1 is not None:
-            sums["l1"], self.acc_l1 = self.acc_l1, self._spares_l1.zeros(self.acc_l1)
+            self._spares_l1.hand(self.acc_l1)
+            sums["l1"], self.acc_l1 = self.acc_l1, np.zeros(self.acc_l1.shape)
+        self._untouched = True
         self.landings = self.counted = 0
         self.seconds = 0.0
         return sums
@@ -251,6 +262,7 @@ class TexelHistogram(Estimator):
     def absorb(self, sums):
         self._spares.clear()  # the tracing is over
         self._spares_l1.clear()
+        self._untouched = False  # the sums may become its own: never to be swapped for a spare
         fresh = self.landings == 0  # nothing of its own yet: the sums become its own (0 + x is x)
         self.acc = _adopt_or_add(self.acc, sums["irradiance"], fresh)
         if self.acc_l1 is not None:

@@ -139,7 +139,8 @@ class TraceJob:
     def tracer(self, threads: int = 0) -> PhotonTracer:
         s = self.settings
         return PhotonTracer(self.scene, s.photons, self.bounces, s.seed, self.batch_size, threads or s.threads,
-                            indirect_only=s.direct == "sampled", margin=self.margin)
+                            indirect_only=s.direct == "sampled", margin=self.margin,
+                            segments=estimators.read_segments(self.names))
 
     def estimators(self) -> dict:
         return {name: estimators.create(name, self.texels, self.settings.estimator_settings, None, self.context)

@@ -136,8 +136,9 @@ class Pipeline:
         self.threads = settings.threads or os.cpu_count() or 1
         if admitted.automatic:
             expect = settings.photons * per_photon / (RAYS_PER_SECOND * self.threads)
+            per_texel = door.photons_per_texel(scene, settings)
             self.report(Progress("prepare", 0.0, f"Photons: {si(settings.photons)}, chosen for the lightmaps' "
-                                                 f"texels ({door.photons_per_texel(scene, settings):.3g} a texel; set them with --photons); "
+                                                 f"texels ({per_texel:.3g} a texel; set them with --photons); "
                                                  f"tracing them should take about {expect:.2g} s on {self.threads} "
                                                  "threads"))
         self.need = memory.check(scene, settings, self.names, self.batch_size, per_photon, self.per_photon_kept,
@@ -187,7 +188,8 @@ class Pipeline:
         if discs and reach_of:
             reach = max(reach, disc_reach_of(scene, settings.estimator_settings, reach_of, settings.resolution))
         tracer = PhotonTracer(scene, settings.photons, self.bounces, settings.seed, self.batch_size,
-                              settings.threads, indirect_only=self.sampled, caster=caster, margin=reach)
+                              settings.threads, indirect_only=self.sampled, caster=caster, margin=reach,
+                              segments=estimators.read_segments(self.names))
         return Layout(texels, caster, sites, at, discs, radius, reach, tracer, seconds)
 
     def plan_denoising(self, lay: Layout) -> Denoising:

@@ -3,10 +3,11 @@ records density estimators use — path segments (DETP family) and surface hits 
 
 A bounce is one diffuse reflection. `bounces` caps the reflections a photon may have made before it
 lands (0 = direct light only), exactly as Cycles' Light Paths › Diffuse bounces does for its bake.
-A photon's first landing always reflects it; later ones by Russian roulette with survival probability
-max(albedo) (scattering.py), so the expected flux is exact and a path ends on its own in closed scenes. Each photon draws its random numbers from its
-own stream, started from (seed, photon id) (`sampling.py`), and records are laid out in an order
-fixed by the batch size alone, so a bake is deterministic for a seed whatever the thread count.
+A photon's first landing always reflects it, later ones by Russian roulette with survival
+probability max(albedo) (scattering.py), so the expected flux is exact and a path ends on its own in
+closed scenes. Each photon draws its random numbers from its own stream, started from (seed, photon
+id) (`sampling.py`), and records are laid out in an order fixed by the batch size alone, so a bake
+is deterministic for a seed whatever the thread count.
 """
 from __future__ import annotations
 
@@ -129,18 +130,19 @@ class _Stream:
     def hit_count(self) -> int:
         return self.hits - self.skip_hits
 
-    def copy_to(self, seg: list[np.ndarray], seg_at: int, hit: list[np.ndarray], hit_at: int) -> None:
+    def copy_to(self, seg: Optional[list], seg_at: int, hit: list[np.ndarray], hit_at: int) -> None:
         """This stream's segments of positive length into rows `seg_at` … of a batch's segment
-        arrays (origin, direction, length, flux), its hits into rows `hit_at` … of its hit arrays.
-        numpy's block copies (memcpy) beat compiled loops several times here."""
+        arrays (origin, direction, length, flux; None: not recorded), its hits into rows `hit_at` …
+        of its hit arrays. numpy's block copies (memcpy) beat compiled loops several times here."""
         a, n, h, nh = self.skip_rays, self.rays, self.skip_hits, self.hits
-        src = self.o[a:n], self.d[a:n], self.length[a:n], self.f[a:n]
-        count = self.segment_count
-        if count < n - a:  # some segment of zero length: none in a closed scene
-            keep = self.length[a:n] > 0.0
-            src = tuple(x[keep] for x in src)
-        for dst, x in zip(seg, src):
-            dst[seg_at:seg_at + count] = x
+        if seg is not None:
+            src = self.o[a:n], self.d[a:n], self.length[a:n], self.f[a:n]
+            count = self.segment_count
+            if count < n - a:  # some segment of zero length: none in a closed scene
+                keep = self.length[a:n] > 0.0
+                src = tuple(x[keep] for x in src)
+            for dst, x in zip(seg, src):
+                dst[seg_at:seg_at + count] = x
         for dst, x in zip(hit, (self.hit_pos, self.hit_dir, self.hit_flux, self.hit_nrm, self.hit_tri)):
             dst[hit_at:hit_at + nh - h] = x[h:nh]
 
@@ -207,6 +209,11 @@ _SEGMENT_ARRAYS = _ArrayPool(_VEC, _VEC, _ROW, _VEC)  # origin, direction, lengt
 _HIT_ARRAYS = _ArrayPool(_VEC, _VEC, _VEC, _VEC, ((), np.int32))  # position, direction, flux, normal, triangle
 
 
+# A batch's segment arrays where the tracer records none (PhotonTracer(segments=False)).
+_NO_SEGMENTS = [np.empty((0, 3), np.float32), np.empty((0, 3), np.float32), np.empty(0, np.float32),
+                np.empty((0, 3), np.float32)]
+
+
 def release_memory() -> None:
     """Let go of the buffers kept for later bakes (stream buffers and idle record arrays)."""
     _FREE.clear()
@@ -222,12 +229,15 @@ class _Records:
     any later streams that were waiting for it. Streams that do not fit wait for `close`, which
     grows the arrays once no thread is copying."""
 
-    def __init__(self, seg_pool: _ArrayPool, hit_pool: _ArrayPool, segments: int, hits: int, streams: int,
-                 keep: int):
+    def __init__(self, seg_pool: Optional[_ArrayPool], hit_pool: _ArrayPool, segments: int, hits: int,
+                 streams: int, keep: int):
         self.pools = seg_pool, hit_pool
         self.keep = keep  # stream buffers to keep once copied
-        self.seg, self.hit = seg_pool.take(segments), hit_pool.take(hits)
+        # No segment pool: the batch's segment arrays are empty, and its segments only counted.
+        self.seg = seg_pool.take(segments) if seg_pool is not None else _NO_SEGMENTS
+        self.hit = hit_pool.take(hits)
         self.segments = self.hits = 0  # rows placed
+        self.segment_total = 0  # segments of the streams added, placed or not
         self.waiting: list[Optional[_Stream]] = [None] * streams
         self.placed = 0  # streams placed
         self.full = False
@@ -235,24 +245,27 @@ class _Records:
         self._lock = threading.Lock()
 
     def _copy(self, st: _Stream, seg_at: int, hit_at: int):
-        st.copy_to(self.seg, seg_at, self.hit, hit_at)
+        st.copy_to(self.seg if self.pools[0] is not None else None, seg_at, self.hit, hit_at)
         if len(_FREE) < self.keep:
             _FREE.append(st)
 
     def add(self, index: int, st: _Stream):
         """Stream `index` is traced (called from the thread that traced it)."""
-        self.stats[index] = (st.rays, st.sums.copy(), st.embree_seconds, st.passes, st.cut, st.first_hits)
+        self.stats[index] = (st.rays, st.sums.copy(), st.embree_seconds, st.passes, st.cut, st.first_hits,
+                             st.segment_count)
+        recorded = self.pools[0] is not None
         jobs = []
         with self._lock:
             self.waiting[index] = st
+            self.segment_total += st.segment_count
             while not self.full and self.placed < len(self.waiting) and self.waiting[self.placed] is not None:
                 nxt = self.waiting[self.placed]
-                if self.segments + nxt.segment_count > len(self.seg[0]) or \
+                if (recorded and self.segments + nxt.segment_count > len(self.seg[0])) or \
                         self.hits + nxt.hit_count > len(self.hit[0]):
                     self.full = True
                     break
                 jobs.append((nxt, self.segments, self.hits))
-                self.segments += nxt.segment_count
+                self.segments += nxt.segment_count if recorded else 0
                 self.hits += nxt.hit_count
                 self.waiting[self.placed] = None
                 self.placed += 1
@@ -262,13 +275,14 @@ class _Records:
     def close(self, photons: int) -> PhotonBatch:
         """Every stream added and copied: place what did not fit, and hand out the batch."""
         rest = [st for st in self.waiting[self.placed:] if st is not None]
+        recorded = self.pools[0] is not None
         for pool, arrays, used, more in zip(self.pools, (self.seg, self.hit), (self.segments, self.hits),
                                             (sum(st.segment_count for st in rest), sum(st.hit_count for st in rest))):
-            if used + more > len(arrays[0]):
+            if pool is not None and used + more > len(arrays[0]):
                 pool.grow(arrays, used + more, used)
         for st in rest:
             self._copy(st, self.segments, self.hits)
-            self.segments += st.segment_count
+            self.segments += st.segment_count if recorded else 0
             self.hits += st.hit_count
         return PhotonBatch(photons, *(a[:self.segments] for a in self.seg), *(a[:self.hits] for a in self.hit))
 
@@ -286,9 +300,12 @@ class PhotonTracer:
 
     def __init__(self, scene: Scene, photons: int, bounces: int, seed: int = 0,
                  batch_size: int = 200_000, threads: int = 0, indirect_only: bool = False,
-                 caster: Optional[RayCaster] = None, margin: float = 0.0):
+                 caster: Optional[RayCaster] = None, margin: float = 0.0, segments: bool = True):
         self.scene = scene
         self.bounces = int(bounces)
+        # Whether batches carry their path segments (the DETP family reads them; the texel histogram
+        # and the photon map read the hits alone): without, a batch's segments are counted, not copied.
+        self.segments = bool(segments)
         # Leave out each photon's first flight (light to first surface) and where it lands: the
         # direct light, when it is sampled with shadow rays instead (direct.py).
         self.indirect_only = bool(indirect_only)
@@ -434,7 +451,7 @@ class PhotonTracer:
         start, stop = self.schedule.ids(index)
         n = stop - start
         bounds = self.stream_bounds(n)
-        records = _Records(_SEGMENT_ARRAYS, _HIT_ARRAYS, int(n * self._per_photon) + 1024,
+        records = _Records(_SEGMENT_ARRAYS if self.segments else None, _HIT_ARRAYS, int(n * self._per_photon) + 1024,
                            int(n * self._per_photon_hits) + 1024, len(bounds), self.threads + 2)
         jobs = [(records, k, index, start + a, start + b) for k, (a, b) in enumerate(bounds)]
         if self._pool is None:
@@ -445,8 +462,9 @@ class PhotonTracer:
                 j.result()
         batch = records.close(n)
         tr = self.stats
-        for rays, sums, embree, passes, cut, first in records.stats:  # in stream order: sums do not depend on timing
+        for rays, sums, embree, passes, cut, first, kept in records.stats:  # in stream order: no timing in the sums
             tr.rays += rays
+            tr.segments += kept
             tr.photons_hit += first
             tr.alpha_passes += passes
             tr.alpha_cut += cut
@@ -456,8 +474,7 @@ class PhotonTracer:
             tr.embree_seconds += embree
         tr.photons += n
         tr.emitted += self.schedule.emitted_flux * self.schedule.weight(index)
-        tr.segments += batch.segment_count
         tr.hits += batch.hit_count
-        self._per_photon = 1.05 * batch.segment_count / n + 0.01
+        self._per_photon = 1.05 * records.segment_total / n + 0.01
         self._per_photon_hits = 1.05 * batch.hit_count / n + 0.01
         return batch
