@@ -108,9 +108,14 @@ def _passes(flat, neighbour, weight, row, passes, out):
 
 def chart_widths_of(texels: TexelSet, scene, lightmaps) -> np.ndarray:
     """(T,) float64: the width in texels (charts.py) of each scene triangle's chart in its lightmap,
-    for the triangles of `lightmaps` (inf elsewhere): the objects alone in their image all at once
+    for the triangles of `lightmaps` (inf elsewhere): as the rasteriser found them
+    (Lightmap.triangle_widths), else the objects alone in their image all at once
     (widths_of_objects), an atlas over all its objects (chart_widths)."""
     width = np.full(len(scene.positions), np.inf)
+    for lm in lightmaps:
+        if lm.triangle_widths is not None:
+            width[lightmap_triangles(scene, lm)] = lm.triangle_widths
+    lightmaps = [lm for lm in lightmaps if lm.triangle_widths is None]
     alone = [lm for lm in lightmaps if len(lm.members) == 1]
     objs = [scene.objects[lm.object_index] for lm in alone]
     runs = [(o.first_triangle, o.first_triangle + o.triangle_count) for o in objs]
