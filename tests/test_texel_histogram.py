@@ -121,3 +121,21 @@ def test_smooth_shading_counts_by_the_shading_normal_as_cycles_does():
                                  denoise=False))
     mean = np.sum(r.value[:, 0] * r.texels.area) / r.texels.area.sum() * np.pi
     assert abs(mean / (s * np.cos(lean)) - 1.0) < 0.01, mean
+
+
+def test_block_sums_are_reused_only_once_nobody_holds_them():
+    """texel_histogram._Spares: a block's sums handed over come back, cleared, for a later block
+    once the bake has let them go; never while anything still holds them (the bake's totals)."""
+    from detp_bake.estimators.texel_histogram import _Spares
+    spares = _Spares()
+    held = np.ones((5, 3))
+    spares.hand(held)
+    untouched = np.zeros((5, 3))
+    assert spares.reuse(untouched) is untouched  # `held` is still held here
+    given = np.ones((5, 3))
+    spares.hand(given)
+    ident = id(given)
+    del given  # the bake added it into its totals and let it go
+    back = spares.reuse(untouched)
+    assert id(back) == ident and not back.any()
+    assert held.all()  # never cleared

@@ -150,6 +150,7 @@ class _Spares:
     An array held elsewhere (the bake's totals adopt the first block's) is never cleared."""
 
     KEEP = 2
+    FREE = None  # the reference count `_refs` reads for an array only the list holds (_calibrated)
 
     def __init__(self):
         self.handed: list = []
@@ -159,13 +160,30 @@ class _Spares:
 
     def reuse(self, untouched: np.ndarray) -> np.ndarray:
         """A spare shaped as `untouched` (new zeros no landing has touched), cleared; or `untouched`."""
+        free = _Spares._calibrated()
         for i in range(len(self.handed)):
-            a = self.handed[i]
-            if a.shape == untouched.shape and sys.getrefcount(a) <= 3:  # this list, `a`, the call's own
-                del self.handed[i]
+            if free is not None and self.handed[i].shape == untouched.shape and self._refs(i) == free:
+                a = self.handed.pop(i)
                 a.fill(0.0)
                 return a
         return untouched
+
+    def _refs(self, i: int) -> int:
+        a = self.handed[i]
+        return sys.getrefcount(a)
+
+    @classmethod
+    def _calibrated(cls):
+        """What `_refs` reads for an array nobody else holds, once; None where it does not read more
+        for one held elsewhere too (an interpreter that counts otherwise): then nothing is reused."""
+        if cls.FREE is None:
+            probe = cls()
+            probe.handed = [np.zeros(1)]
+            free = probe._refs(0)
+            held = probe.handed[0]
+            cls.FREE = free if probe._refs(0) > free else -1
+            del held
+        return cls.FREE if cls.FREE >= 0 else None
 
     def clear(self) -> None:
         self.handed = []
