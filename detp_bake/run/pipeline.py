@@ -130,8 +130,8 @@ class Pipeline:
         first = 1 if self.sampled else 0  # the first flight is direct light, left out when sampled
         scene = self.scene
         survival = scattering.survival(scene.albedo, scene.positions)
-        per_photon = scattering.flights_per_photon(survival, self.bounces)
-        self.per_photon_kept = scattering.flights_per_photon(survival, self.bounces, first)
+        per_photon = scattering.flights_per_photon(survival, self.bounces, certain=self.sampled)
+        self.per_photon_kept = scattering.flights_per_photon(survival, self.bounces, first, certain=self.sampled)
         self.batch_size = memory.batch_photons(settings.batch_size, per_photon)
         self.threads = settings.threads or os.cpu_count() or 1
         if admitted.automatic:

@@ -3,9 +3,9 @@ records density estimators use — path segments (DETP family) and surface hits 
 
 A bounce is one diffuse reflection. `bounces` caps the reflections a photon may have made before it
 lands (0 = direct light only), exactly as Cycles' Light Paths › Diffuse bounces does for its bake.
-A photon's first landing always reflects it, later ones by Russian roulette with survival
-probability max(albedo) (scattering.py), so the expected flux is exact and a path ends on its own in
-closed scenes. Each photon draws its random numbers from its own stream, started from (seed, photon
+A photon that brings indirect light alone always reflects from its first landing, and otherwise by
+Russian roulette with survival probability max(albedo) (scattering.py), so the expected flux is
+exact and a path ends on its own in closed scenes. Each photon draws its random numbers from its own stream, started from (seed, photon
 id) (`sampling.py`), and records are laid out in an order fixed by the batch size alone, so a bake
 is deterministic for a seed whatever the thread count.
 """
@@ -327,7 +327,7 @@ class PhotonTracer:
         # survival probability; later batches go by what earlier ones made. (A batch that makes
         # more grows its arrays at the end.)
         q = float(np.mean(self.materials[self.material_of, 3])) if len(self.material_of) else 0.0
-        self._per_photon = flights_per_photon(min(q, 0.95), min(self.bounces, 200))
+        self._per_photon = flights_per_photon(min(q, 0.95), min(self.bounces, 200), certain=self.indirect_only)
         self._per_photon_hits = self._per_photon
 
     @property
@@ -407,7 +407,7 @@ class PhotonTracer:
                                       st.rng, st.hit_pos, st.hit_dir, st.hit_flux, st.hit_nrm, st.hit_tri, st.hits,
                                       self.material_of, self.materials, srf.albedo_tex, srf.tex_uvs, srf.pixels,
                                       srf.info, level, self.bounces, self.centre, self.escape_radius, self.eps,
-                                      st.sums)
+                                      st.sums, self.indirect_only)
             st.kept += kept
             if level == 0:
                 st.first_hits = st.hits

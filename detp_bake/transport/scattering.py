@@ -6,13 +6,16 @@ surface with the probability of its transparency (Cycles treats alpha as stochas
 continuing it in a new ray from just past the surface; `bounce` records where the others land and
 reflects them. The albedo is the triangle's constant, or that constant times its texture at the hit.
 
-From its first landing every photon is reflected, its flux times the albedo; from the later ones by
-Russian roulette with survival probability q = max(albedo), its flux times albedo / q. Both keep the
-expected flux exact. The first landing is where the roulette costs most: its flights carry the
-whole of the first bounce's light, and a photon lost there took a ray from the light for nothing.
-Its landings' flux squared, summed, is q times what the roulette gives, so the same noise takes q
-times the photons (`survival` sets the automatic count by it); on the arena-like level
-(benchmarks/levels.py) that was 37 % fewer rays (docs/benchmarks.md, "The first bounce").
+Where the photons bring the indirect light alone (shadow rays the direct: PhotonTracer's
+indirect_only), every photon is reflected from its first landing, its flux times the albedo; from
+the later ones, and from every landing otherwise, by Russian roulette with survival probability
+q = max(albedo), its flux times albedo / q. Both keep the expected flux exact. The first landing is
+where the roulette costs most there: a photon lost at it took a ray from the light for nothing, and
+its landings' flux squared, summed, is q times what the roulette gives, so the same noise takes q
+times the photons (`survival` sets the automatic count by it). On the arena-like level
+(benchmarks/levels.py) that was 24 % fewer rays (docs/benchmarks.md, "The first bounce without
+roulette"). Where the photons bring the direct light too, their first landings are that light and
+are counted as they are; reflecting them all would make each photon dearer for the smaller part.
 """
 from __future__ import annotations
 
@@ -35,17 +38,18 @@ def survival(albedo: np.ndarray, positions: np.ndarray) -> float:
     return float(area @ a / total) if total > 0.0 else float(a.mean()) if len(a) else 0.0
 
 
-def flights_per_photon(survival: float, bounces: int, first: int = 0) -> float:
+def flights_per_photon(survival: float, bounces: int, first: int = 0, certain: bool = True) -> float:
     """Expected flights of one photon from flight `first` to flight `bounces` (flight 0 leaves the
-    light; flight b ends its b-th reflection): the first reflection is certain where anything
-    reflects, each later one survives the roulette with probability `survival`."""
+    light; flight b ends its b-th reflection): with `certain`, the first reflection is certain where
+    anything reflects; each other one survives the roulette with probability `survival`."""
     q = min(max(survival, 0.0), 1.0)
     last = min(int(bounces), 100_000)
     if q <= 0.0:
         return 1.0 if first == 0 else 0.0
     if q >= 1.0:
         return float(max(last + 1 - first, 0))
-    return float(sum(1.0 if b == 0 else q ** (b - 1) for b in range(first, last + 1)))
+    lost = 1 if certain else 0  # reflections that do not meet the roulette
+    return float(sum(q ** max(b - lost, 0) for b in range(first, last + 1)))
 
 
 def material_table(albedo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -98,10 +102,11 @@ def pass_through(a, b, prim, bu, bv, through, o, d, f, length, rng, opacity, opa
 @jit
 def bounce(s, e, prim, ng, bu, bv, through, o, d, f, length, rng, hit_pos, hit_dir, hit_flux, hit_nrm, hit_tri,
            nh, material_of, materials, albedo_tex, tex_uvs, pixels, info, level, max_bounces, centre,
-           escape_radius, eps, sums):
+           escape_radius, eps, sums, certain):
     """Rays s … e−1 of one stream's log after Embree (and `pass_through`): segment lengths (Embree
     wrote the hit distances into `length`), hit records from `nh` on, and the diffuse reflection
-    (certain from a first landing, `level` 0; Russian roulette after: module docstring), whose survivors are appended to the log from e on, with their random
+    (from a first landing, `level` 0, certain when `certain`; else Russian roulette: module
+    docstring), whose survivors are appended to the log from e on, with their random
     states. `materials` rows are (albedo RGB, survival probability q, albedo / q); a triangle with
     an albedo texture scales its row's albedo by the texture at the hit. `sums` rows gain the
     absorbed, escaped and truncated flux. Returns (end of the log, hit count, segments of
@@ -166,7 +171,7 @@ def bounce(s, e, prim, ng, bu, bv, through, o, d, f, length, rng, hit_pos, hit_d
             tr2 += f2 * a2
             continue
         state, u0, u1 = uniform2(rng[i])
-        if level == 0:  # from its first landing every photon is reflected, its flux times the albedo
+        if level == 0 and certain:  # every photon reflected from its first landing, its flux times the albedo
             if q <= 0.0:
                 continue
             c0, c1, c2 = a0, a1, a2
