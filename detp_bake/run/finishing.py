@@ -30,7 +30,7 @@ class Denoising:
     """What the denoiser of every lightmap needs from the texels' geometry, found once: `regions`
     {lightmap: texels that see each other (validity.regions), the objects of an atlas apart
     (validity.by_object)}, denoised apart; `fragments` {lightmap: the texels of charts too narrow for
-    OIDN and their neighbours on the surface (fragments.find), or None}, smoothed instead."""
+    OIDN and their neighbours on the surface (fragments.find_all), or None}, smoothed instead."""
     regions: dict = field(default_factory=dict)
     fragments: dict = field(default_factory=dict)
     seconds: dict = field(default_factory=dict)
