@@ -390,7 +390,7 @@ class PhotonTracer:
         st.passes = st.cut = st.first_hits = 0
         st.sums[:] = 0.0
         st.embree_seconds = 0.0
-        st.reserve(2 * n, n)
+        st.reserve((3 if self.indirect_only else 2) * n, n)  # the first reflection is certain there
         self.schedule.emit(batch, start, stop, st.o, st.d, st.f, st.rng)
         st.length[:n] = RAY_FAR
         s, e, level = 0, n, 0
