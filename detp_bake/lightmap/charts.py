@@ -139,29 +139,29 @@ def _border(owner: np.ndarray, res: int) -> np.ndarray:
     return border & (mine >= 0)
 
 
-def chart_stats(uv: np.ndarray, positions: np.ndarray, res: int, pixel: np.ndarray,
-                texel_tri: np.ndarray, widths=None) -> tuple[int, float, float]:
+def chart_stats(res: int, pixel: np.ndarray, texel_tri: np.ndarray, widths) -> tuple[int, float, float]:
     """(charts, median chart width in texels, share of border texels) of one object's lightmap of
-    `res`² texels: `uv` its (T, 3, 2) UVs, `positions` its (T, 3, 3) corners, `pixel` its covered
-    texels and `texel_tri` their triangles (indices into `uv`); `widths`: its `chart_widths`, if
-    known (`widths_of_objects`)."""
-    if len(uv) == 0 or len(pixel) == 0:
-        return 0 if len(uv) == 0 else chart_of_triangles(uv, positions)[0], 0.0, 0.0
-    chart, width = chart_widths(uv, positions, res) if widths is None else widths
+    `res`² texels: `pixel` its covered texels, `texel_tri` their triangles (indices into its own
+    triangles) and `widths` (chart of each triangle, each chart's width) as `chart_widths` or
+    `widths_of_objects` give them."""
+    chart, width = widths
+    if len(width) == 0 or len(pixel) == 0:
+        return len(width), 0.0, 0.0
     owner = np.full(res * res, -1, np.int64)
     owner[pixel] = chart[texel_tri]
     return len(width), float(np.median(width)), float(_border(owner, res).sum()) / len(pixel)
 
 
-def into_placement(placement: dict, objects, triangles, uv, positions, res: int, pixel, texel_tri, doubled) -> None:
+def into_placement(placement: dict, objects, triangles, widths, res: int, pixel, texel_tri, doubled) -> None:
     """Each atlas object's own charts (chart_stats of its charts alone, border texels as the atlas
     has them) and the share of its texels under two or more faces, into its `placement` entry
     (texels.Lightmap.placement): the warnings name objects, not the atlas. `objects` the atlas's
-    BakeObjects, `triangles` the scene's triangles of `uv`, `doubled` per covered texel."""
-    if len(uv) == 0 or len(pixel) == 0:
+    BakeObjects, `triangles` the scene's triangles of the atlas, `widths` their `chart_widths`,
+    `doubled` per covered texel."""
+    chart, width = widths
+    if len(triangles) == 0 or len(pixel) == 0:
         return
     member = np.searchsorted([o.first_triangle for o in objects], triangles, side="right") - 1
-    chart, width = chart_widths(uv, positions, res)
     owner = np.full(res * res, -1, np.int64)
     owner[pixel] = chart[texel_tri]
     on_border = _border(owner, res).reshape(-1)[pixel]

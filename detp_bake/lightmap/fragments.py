@@ -33,7 +33,6 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .charts import chart_widths, widths_of_objects
 from ..sampling import jit
 from ..bvh import TriangleTree
 from ..kdtree import query_groups
@@ -108,26 +107,11 @@ def _passes(flat, neighbour, weight, row, passes, out):
 
 def chart_widths_of(texels: TexelSet, scene, lightmaps) -> np.ndarray:
     """(T,) float64: the width in texels (charts.py) of each scene triangle's chart in its lightmap,
-    for the triangles of `lightmaps` (inf elsewhere): as the rasteriser found them
-    (Lightmap.triangle_widths), else the objects alone in their image all at once
-    (widths_of_objects), an atlas over all its objects (chart_widths)."""
+    for the triangles of `lightmaps` (inf elsewhere), as the rasteriser found them
+    (Lightmap.triangle_widths)."""
     width = np.full(len(scene.positions), np.inf)
     for lm in lightmaps:
-        if lm.triangle_widths is not None:
-            width[lightmap_triangles(scene, lm)] = lm.triangle_widths
-    lightmaps = [lm for lm in lightmaps if lm.triangle_widths is None]
-    alone = [lm for lm in lightmaps if len(lm.members) == 1]
-    objs = [scene.objects[lm.object_index] for lm in alone]
-    runs = [(o.first_triangle, o.first_triangle + o.triangle_count) for o in objs]
-    if runs:
-        found = widths_of_objects(scene.uvs, scene.positions, runs, [lm.width for lm in alone])
-        tri = np.concatenate([np.arange(a, b) for a, b in runs])
-        width[tri] = np.concatenate([w[c] for c, w in found])
-    for lm in lightmaps:
-        if len(lm.members) > 1:  # atlases: few
-            sl = lightmap_triangles(scene, lm)
-            chart, w = chart_widths(scene.uvs[sl], scene.positions[sl], lm.width)
-            width[sl] = w[chart]
+        width[lightmap_triangles(scene, lm)] = lm.triangle_widths
     return width
 
 

@@ -50,7 +50,7 @@ class Lightmap:
     border: float = 0.0
 
     # Each of its triangles' chart width in texels (charts.chart_widths, in lightmap_triangles' order),
-    # found while rasterising; the denoiser's fragments read it (fragments.chart_widths_of).
+    # set by `rasterise`; the denoiser's fragments read it (fragments.chart_widths_of).
     triangle_widths: Optional[np.ndarray] = None
     objects: tuple = ()  # an atlas: every object in it, in scene order (else empty: object_index alone)
     # An atlas: {object name: {"texels": its covered texels, "rect": [x0, y0, x1, y1] the pixels its
@@ -350,16 +350,14 @@ def rasterise(scene: Scene) -> TexelSet:
         sl = lightmap_triangles(scene, lm) if obj.image else obj.triangles
         first = sl if obj.image else int(obj.first_triangle)
         pixel, tri, local, area, centre, doubled = _cover(lm, uv[sl], world_area[sl], res, first)
-        found = widths.get(obj.name) if not obj.image else \
-            charts_mod.chart_widths(uv[sl], scene.positions[sl], res) if len(sl) else None
-        lm.charts, lm.chart_width, lm.border = charts_mod.chart_stats(uv[sl], scene.positions[sl], res, pixel, local,
-                                                                      found)
-        lm.triangle_widths = None if found is None else found[1][found[0]]
+        found = widths[obj.name] if not obj.image else charts_mod.chart_widths(uv[sl], scene.positions[sl], res)
+        lm.charts, lm.chart_width, lm.border = charts_mod.chart_stats(res, pixel, local, found)
+        lm.triangle_widths = found[1][found[0]]
         lm.count, lm.texel_size = len(pixel), _texel_size(world_area, uv_area, sl, res)
         if obj.image:
             lm.placement = _placement(scene, members, tri, pixel, res, world_area, uv_area)
-            charts_mod.into_placement(lm.placement, [scene.objects[i] for i in members], sl, uv[sl],
-                                      scene.positions[sl], res, pixel, local, doubled)
+            charts_mod.into_placement(lm.placement, [scene.objects[i] for i in members], sl, found, res, pixel,
+                                      local, doubled)
         # Positions and normals last, once the pixel grids are gone: the peak is what the TexelSet keeps.
         pos = np.empty((len(pixel), 3))
         nrm = np.empty((len(pixel), 3))
