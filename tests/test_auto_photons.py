@@ -58,10 +58,11 @@ def test_with_shadow_rays_the_count_is_scaled_by_the_surfaces_survival():
     assert bake_mod.auto_photons(sc, BakeSettings()) == PHOTONS_PER_TEXEL * 1024 ** 2 // 2
     assert bake_mod.auto_photons(sc, BakeSettings(direct="photons")) == PHOTONS_PER_TEXEL * 1024 ** 2
     # The denoiser's plan counts photons as worth 1/q with the roulette (fragments.starved_lightmaps).
-    assert door.roulette_share(sc, BakeSettings()) == 0.5
-    assert door.roulette_share(sc, BakeSettings(direct="photons")) == 1.0
+    q = survival(sc.albedo, sc.positions)
+    assert door.roulette_share(q, BakeSettings()) == 0.5
+    assert door.roulette_share(q, BakeSettings(direct="photons")) == 1.0
     black = make_scene([("Floor", grid(2.0, 2.0, 2), 0.0, True)], [], resolution=8)
-    assert door.roulette_share(black, BakeSettings()) == 1.0 / 64
+    assert door.roulette_share(survival(black.albedo, black.positions), BakeSettings()) == 1.0 / 64
     # Two surfaces of albedo 1 and 0.25, the first three times the other's area: (3 + 0.25) / 4.
     two = make_scene([("A", grid(3.0, 1.0, 2), 1.0, True), ("B", grid(1.0, 1.0, 2), 0.25, True)], [], resolution=8)
     assert np.isclose(survival(two.albedo, two.positions), 0.8125)

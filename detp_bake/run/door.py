@@ -54,23 +54,25 @@ def auto_photons(scene, settings: BakeSettings) -> int:
     firsts = (scene.objects[members[0]] for _, members in texels_mod.images(scene))
     texels = sum((o.resolution if o.resolution > 0 else settings.resolution) ** 2 for o in firsts)
     low, high = AUTO_PHOTONS
-    return int(min(max(photons_per_texel(scene, settings) * texels, low), high))
+    per_texel = photons_per_texel(scattering.survival(scene.albedo, scene.positions), settings)
+    return int(min(max(per_texel * texels, low), high))
 
 
-def photons_per_texel(scene, settings: BakeSettings) -> float:
+def photons_per_texel(survival: float, settings: BakeSettings) -> float:
     """PHOTONS_PER_TEXEL, times `roulette_share`: the noise PHOTONS_PER_TEXEL gave with the roulette
     at the first landing."""
-    return PHOTONS_PER_TEXEL * roulette_share(scene, settings)
+    return PHOTONS_PER_TEXEL * roulette_share(survival, settings)
 
 
-def roulette_share(scene, settings: BakeSettings) -> float:
+def roulette_share(survival: float, settings: BakeSettings) -> float:
     """How many photons with the roulette at their first landing one photon of this bake's is worth,
-    inverted: the surfaces' survival q where the photons bring the indirect light alone (shadow rays
-    the direct), as their first reflection is certain (scattering.py) and q times the photons then
-    give the same noise; else 1. At least 1/64 (a black scene has no indirect light to count)."""
+    inverted: the surfaces' `survival` q (scattering.survival) where the photons bring the indirect
+    light alone (shadow rays the direct), as their first reflection is certain (scattering.py) and
+    q times the photons then give the same noise; else 1. At least 1/64 (a black scene has no
+    indirect light to count)."""
     if settings.direct != "sampled":
         return 1.0
-    return max(scattering.survival(scene.albedo, scene.positions), 1.0 / 64.0)
+    return max(survival, 1.0 / 64.0)
 
 
 def with_photons(admission: Admission, scene) -> Admission:

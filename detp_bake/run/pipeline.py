@@ -129,14 +129,14 @@ class Pipeline:
         self.sampled = settings.direct == "sampled"
         first = 1 if self.sampled else 0  # the first flight is direct light, left out when sampled
         scene = self.scene
-        survival = scattering.survival(scene.albedo, scene.positions)
+        self.survival = survival = scattering.survival(scene.albedo, scene.positions)
         per_photon = scattering.flights_per_photon(survival, self.bounces, certain=self.sampled)
         self.per_photon_kept = scattering.flights_per_photon(survival, self.bounces, first, certain=self.sampled)
         self.batch_size = memory.batch_photons(settings.batch_size, per_photon)
         self.threads = settings.threads or os.cpu_count() or 1
         if admitted.automatic:
             expect = settings.photons * per_photon / (RAYS_PER_SECOND * self.threads)
-            per_texel = door.photons_per_texel(scene, settings)
+            per_texel = door.photons_per_texel(survival, settings)
             self.report(Progress("prepare", 0.0, f"Photons: {si(settings.photons)}, chosen for the lightmaps' "
                                                  f"texels ({per_texel:.3g} a texel; set them with --photons); "
                                                  f"tracing them should take about {expect:.2g} s on {self.threads} "
@@ -199,7 +199,7 @@ class Pipeline:
             return Denoising()
         self.report(Progress("prepare", 0.0, "Finding the denoiser's regions and fragments"))
         # The photons' worth with the roulette at the first landing: what STARVED_PHOTONS counts.
-        worth = self.settings.photons / door.roulette_share(self.scene, self.settings)
+        worth = self.settings.photons / door.roulette_share(self.survival, self.settings)
         plan = plan_denoising(lay.texels, self.scene, lay.caster, self.threads, int(worth))
         lay.seconds["validity"] += plan.seconds["regions"]
         lay.seconds["fragments"] = plan.seconds["fragments"]

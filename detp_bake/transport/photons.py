@@ -26,7 +26,7 @@ from ..rays import RayCaster
 from .lights import build_emitters
 from .schedule import BatchSchedule
 from .textures import surfaces
-from .scattering import MAX_PASSES, RAY_FAR, bounce, flights_per_photon, material_table, pass_through
+from .scattering import MAX_PASSES, RAY_FAR, bounce, flights_per_photon, material_table, pass_through, survival
 from ..scene import Scene
 
 
@@ -326,7 +326,7 @@ class PhotonTracer:
         # Records per photon, for the first batch's arrays: paths in a closed scene of the mean
         # survival probability; later batches go by what earlier ones made. (A batch that makes
         # more grows its arrays at the end.)
-        q = float(np.mean(self.materials[self.material_of, 3])) if len(self.material_of) else 0.0
+        q = survival(scene.albedo, scene.positions)
         self._per_photon = flights_per_photon(min(q, 0.95), min(self.bounces, 200), certain=self.indirect_only)
         self._per_photon_hits = self._per_photon
 
