@@ -141,35 +141,34 @@ def _add_l1(texel, weight, flux, direction, acc):
 
 
 class _Spares:
-    """The block sums `take` handed over, filled again once nobody else holds them (the bake has
-    added them into its totals and let them go): a block's first landing then goes into one of them,
+    """The block sums `take` handed over last, filled again once nobody else holds them (the bake has
+    added them into its totals and let them go): a block's first landing then goes into them,
     cleared, instead of into new zeros, which are mapped fresh, so that every page the block touched
     faulted once. At 557k texels that was 3,300 faults a block and about 0.4 s of a 1024² bake's
     main thread, where clearing an array takes a millisecond. Nothing more is held at once than with
     new zeros: the spare is taken up when the next block begins, after the bake let the last one go.
     An array held elsewhere (the bake's totals adopt the first block's) is never cleared."""
 
-    KEEP = 2
-    FREE = None  # the reference count `_refs` reads for an array only the list holds (_calibrated)
+    FREE = None  # the reference count `_refs` reads for an array only this holds (_calibrated)
 
     def __init__(self):
-        self.handed: list = []
+        self.last = None
 
     def hand(self, sums: np.ndarray) -> None:
-        self.handed = (self.handed + [sums])[-self.KEEP:]
+        self.last = sums
 
     def reuse(self, untouched: np.ndarray) -> np.ndarray:
-        """A spare shaped as `untouched` (new zeros no landing has touched), cleared; or `untouched`."""
+        """The spare, cleared, where it is shaped as `untouched` (new zeros no landing has touched)
+        and free; else `untouched`."""
         free = _Spares._calibrated()
-        for i in range(len(self.handed)):
-            if free is not None and self.handed[i].shape == untouched.shape and self._refs(i) == free:
-                a = self.handed.pop(i)
-                a.fill(0.0)
-                return a
-        return untouched
+        if free is None or self.last is None or self.last.shape != untouched.shape or self._refs() != free:
+            return untouched
+        a, self.last = self.last, None
+        a.fill(0.0)
+        return a
 
-    def _refs(self, i: int) -> int:
-        a = self.handed[i]
+    def _refs(self) -> int:
+        a = self.last
         return sys.getrefcount(a)
 
     @classmethod
@@ -178,15 +177,14 @@ class _Spares:
         for one held elsewhere too (an interpreter that counts otherwise): then nothing is reused."""
         if cls.FREE is None:
             probe = cls()
-            probe.handed = [np.zeros(1)]
-            free = probe._refs(0)
-            held = probe.handed[0]
-            cls.FREE = free if probe._refs(0) > free else -1
-            del held
+            probe.hand(np.zeros(1))
+            free = probe._refs()
+            elsewhere = [probe.last]  # the same array held once more
+            cls.FREE = free if elsewhere and probe._refs() > free else -1
         return cls.FREE if cls.FREE >= 0 else None
 
     def clear(self) -> None:
-        self.handed = []
+        self.last = None
 
 
 def _adopt_or_add(own: np.ndarray, given: np.ndarray, fresh: bool) -> np.ndarray:
